@@ -1,0 +1,23 @@
+//! # wheelid-core
+//!
+//! The bottom layer of wheelid: the data (recordings, conditioned signals), the traits that the
+//! other crates implement ([`RegressorModel`], [`Solver`]) and the errors.
+//!
+//! A run walks the layers once:
+//! **read** ([`recording`]) → **condition** ([`condition`], [`signal`]: resample, align, filter,
+//! differentiate) → **model** ([`RegressorModel`]: regressor, simulate, in `wheelid-models`) →
+//! **fit** ([`Solver`], in `wheelid-solvers`) → **report** (the `wheelid` crate).
+
+pub mod condition;
+pub mod error;
+pub mod metrics;
+pub mod model;
+pub mod recording;
+pub mod signal;
+pub mod solver;
+
+pub use condition::{ConditionSettings, Conditioned, CutoffChoice};
+pub use error::{Error, Location, Result};
+pub use model::{ChannelInfo, ChannelRegression, ParamInfo, RegressorModel, Simulation};
+pub use recording::{CommandHold, Recording, VelocitySampling};
+pub use solver::{BoundState, LinearFit, LinearProblem, SolveError, SolveStatus, Solver};

@@ -1,0 +1,668 @@
+//! Recordings: one drive of a differential-drive robot, in the CSV format of
+//! `shared/data/RECORDING_FORMAT.md` (version 1).
+//!
+//! ```text
+//! # robot: pioneer3dx
+//! # command_hold: zoh
+//! t,v_ref,w_ref,v,w,x,y,phi
+//! 0.000,0.4000,0.7500,0.0000,0.0000,0.0000,0.0000,0.0000
+//! ```
+//!
+//! * `#` lines before the header are metadata, `key: value`.
+//! * Required columns (SI units): `t` [s] strictly increasing, `v_ref` [m/s], `w_ref` [rad/s],
+//!   `v` [m/s], `w` [rad/s]. Optional: `x`, `y` [m], `phi` [rad], `wl`, `wr` [rad/s].
+//!   Column order is free; other columns are ignored.
+//!
+//! Two metadata keys that wheelid writes and reads say how the samples relate to continuous
+//! time (both optional):
+//! * `command_hold: zoh` (default) — each command sample was held until the next one
+//!   (zero-order hold), as every digital robot interface does; `command_hold: sampled` — the
+//!   command column holds instantaneous samples of a continuous signal.
+//! * `velocity_sampling: instant` (default) — `v`, `w` are instantaneous values at `t`;
+//!   `velocity_sampling: window_average` — they are averages over the preceding sample period
+//!   (encoder ticks counted over one cycle, as Pioneer and most base controllers report).
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use crate::error::{Error, Location, Result};
+
+/// How the recorded commands were applied between samples.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CommandHold {
+    /// Each command was held constant until the next sample (zero-order hold).
+    #[default]
+    Zoh,
+    /// Samples of a continuous command signal.
+    Sampled,
+}
+
+/// What a measured velocity sample stands for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum VelocitySampling {
+    /// The instantaneous velocity at `t`.
+    #[default]
+    Instant,
+    /// The average velocity over the sample period that ends at `t`.
+    WindowAverage,
+}
+
+/// One drive: commands and measured velocities on a common time base.
+///
+/// All columns have the same length `n`. Units are SI: seconds, m/s, rad/s, m, rad.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Recording {
+    /// Where the recording came from (a file path, or a name for generated data).
+    pub source: PathBuf,
+    /// Metadata `key: value` pairs, in file order.
+    pub meta: Vec<(String, String)>,
+    /// Time [s], strictly increasing.
+    pub t: Vec<f64>,
+    /// Commanded forward velocity [m/s].
+    pub v_ref: Vec<f64>,
+    /// Commanded angular velocity [rad/s].
+    pub w_ref: Vec<f64>,
+    /// Measured forward velocity [m/s].
+    pub v: Vec<f64>,
+    /// Measured angular velocity [rad/s].
+    pub w: Vec<f64>,
+    /// Optional odometry pose x [m].
+    pub x: Option<Vec<f64>>,
+    /// Optional odometry pose y [m].
+    pub y: Option<Vec<f64>>,
+    /// Optional heading [rad].
+    pub phi: Option<Vec<f64>>,
+    /// Optional left wheel angular velocity [rad/s].
+    pub wl: Option<Vec<f64>>,
+    /// Optional right wheel angular velocity [rad/s].
+    pub wr: Option<Vec<f64>>,
+}
+
+const REQUIRED: [&str; 5] = ["t", "v_ref", "w_ref", "v", "w"];
+const OPTIONAL: [&str; 5] = ["x", "y", "phi", "wl", "wr"];
+
+/// How the sampling of a recording looks.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SamplingInfo {
+    /// Median sample period [s].
+    pub dt_median: f64,
+    /// Smallest sample period [s].
+    pub dt_min: f64,
+    /// Largest sample period [s].
+    pub dt_max: f64,
+    /// Whether the sampling counts as uniform: every period within 1e-6 relative of the median.
+    pub uniform: bool,
+}
+
+impl Recording {
+    /// Builds a recording from the five required columns.
+    ///
+    /// # Errors
+    /// [`Error::LengthMismatch`] if the columns differ in length; [`Error::BadValue`] for a
+    /// non-finite value; [`Error::TimeNotIncreasing`] if `t` is not strictly increasing.
+    pub fn new(
+        source: impl Into<PathBuf>,
+        t: Vec<f64>,
+        v_ref: Vec<f64>,
+        w_ref: Vec<f64>,
+        v: Vec<f64>,
+        w: Vec<f64>,
+    ) -> Result<Self> {
+        let rec = Self {
+            source: source.into(),
+            meta: Vec::new(),
+            t,
+            v_ref,
+            w_ref,
+            v,
+            w,
+            x: None,
+            y: None,
+            phi: None,
+            wl: None,
+            wr: None,
+        };
+        rec.check()?;
+        Ok(rec)
+    }
+
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.t.len()
+    }
+
+    /// True when the recording has no samples.
+    pub fn is_empty(&self) -> bool {
+        self.t.is_empty()
+    }
+
+    /// Duration t[n−1] − t[0] [s] (0 for fewer than two samples).
+    pub fn duration(&self) -> f64 {
+        match (self.t.first(), self.t.last()) {
+            (Some(a), Some(b)) => b - a,
+            _ => 0.0,
+        }
+    }
+
+    /// The value of metadata `key`, if present (the last one wins).
+    pub fn meta(&self, key: &str) -> Option<&str> {
+        self.meta
+            .iter()
+            .rev()
+            .find(|(k, _)| k == key)
+            .map(|(_, v)| v.as_str())
+    }
+
+    /// Sets (or replaces) metadata `key`.
+    pub fn set_meta(&mut self, key: &str, value: impl Into<String>) {
+        let value = value.into();
+        if let Some(slot) = self.meta.iter_mut().find(|(k, _)| k == key) {
+            slot.1 = value;
+        } else {
+            self.meta.push((key.to_owned(), value));
+        }
+    }
+
+    /// How commands were applied (metadata `command_hold`, default zero-order hold).
+    pub fn command_hold(&self) -> CommandHold {
+        match self.meta("command_hold") {
+            Some("sampled") => CommandHold::Sampled,
+            _ => CommandHold::Zoh,
+        }
+    }
+
+    /// What the velocity samples stand for (metadata `velocity_sampling`, default instant).
+    pub fn velocity_sampling(&self) -> VelocitySampling {
+        match self.meta("velocity_sampling") {
+            Some("window_average") => VelocitySampling::WindowAverage,
+            _ => VelocitySampling::Instant,
+        }
+    }
+
+    /// Sample-period statistics. Needs at least two samples (returns zeros otherwise).
+    pub fn sampling(&self) -> SamplingInfo {
+        let mut dts: Vec<f64> = self.t.windows(2).map(|w| w[1] - w[0]).collect();
+        if dts.is_empty() {
+            return SamplingInfo {
+                dt_median: 0.0,
+                dt_min: 0.0,
+                dt_max: 0.0,
+                uniform: true,
+            };
+        }
+        dts.sort_by(f64::total_cmp);
+        let dt_median = dts[dts.len() / 2];
+        let dt_min = dts[0];
+        let dt_max = dts[dts.len() - 1];
+        let tol = 1e-6 * dt_median;
+        SamplingInfo {
+            dt_median,
+            dt_min,
+            dt_max,
+            uniform: (dt_max - dt_median) <= tol && (dt_median - dt_min) <= tol,
+        }
+    }
+
+    /// Resamples onto the uniform grid t0, t0 + dt, … ≤ t_last.
+    ///
+    /// Commands are resampled by zero-order hold (the last command sent at or before each grid
+    /// time), because that is how a robot applies them; measured velocities, pose and wheel
+    /// speeds by linear interpolation. Metadata is kept, plus `resampled_from: <median dt>`.
+    ///
+    /// # Errors
+    /// [`Error::InvalidSetting`] if `dt` is not positive and finite, or the recording has
+    /// fewer than two samples.
+    pub fn resample_uniform(&self, dt: f64) -> Result<Self> {
+        if !(dt.is_finite() && dt > 0.0) {
+            return Err(Error::InvalidSetting(format!(
+                "resampling period must be positive, got {dt}"
+            )));
+        }
+        if self.len() < 2 {
+            return Err(Error::InvalidSetting(
+                "cannot resample fewer than two samples".into(),
+            ));
+        }
+        let t0 = self.t[0];
+        let span = self.duration();
+        // Round so that a grid point that lands on t_last within rounding is kept.
+        let n = (span / dt + 1e-9).floor() as usize + 1;
+        let grid: Vec<f64> = (0..n).map(|k| t0 + k as f64 * dt).collect();
+        let idx = bracket(&self.t, &grid);
+        let hold = |col: &[f64]| idx.iter().map(|&(i, _)| col[i]).collect::<Vec<_>>();
+        let lin = |col: &[f64]| {
+            idx.iter()
+                .map(|&(i, a)| {
+                    if a == 0.0 {
+                        col[i]
+                    } else {
+                        col[i] + a * (col[i + 1] - col[i])
+                    }
+                })
+                .collect::<Vec<_>>()
+        };
+        let mut out = Self {
+            source: self.source.clone(),
+            meta: self.meta.clone(),
+            t: grid,
+            v_ref: hold(&self.v_ref),
+            w_ref: hold(&self.w_ref),
+            v: lin(&self.v),
+            w: lin(&self.w),
+            x: self.x.as_deref().map(lin),
+            y: self.y.as_deref().map(lin),
+            phi: self.phi.as_deref().map(lin),
+            wl: self.wl.as_deref().map(lin),
+            wr: self.wr.as_deref().map(lin),
+        };
+        out.set_meta("resampled_from", format!("{}", self.sampling().dt_median));
+        Ok(out)
+    }
+
+    /// Checks lengths, finiteness and strictly increasing time.
+    fn check(&self) -> Result<()> {
+        let n = self.t.len();
+        let cols: [(&str, Option<&Vec<f64>>); 10] = [
+            ("v_ref", Some(&self.v_ref)),
+            ("w_ref", Some(&self.w_ref)),
+            ("v", Some(&self.v)),
+            ("w", Some(&self.w)),
+            ("x", self.x.as_ref()),
+            ("y", self.y.as_ref()),
+            ("phi", self.phi.as_ref()),
+            ("wl", self.wl.as_ref()),
+            ("wr", self.wr.as_ref()),
+            ("t", Some(&self.t)),
+        ];
+        for (name, col) in cols {
+            let Some(col) = col else { continue };
+            if col.len() != n {
+                return Err(Error::LengthMismatch {
+                    column: name.into(),
+                    len: col.len(),
+                    expected: n,
+                });
+            }
+            if let Some(i) = col.iter().position(|x| !x.is_finite()) {
+                return Err(Error::BadValue {
+                    at: Location {
+                        file: self.source.clone(),
+                        line: i as u64 + 1,
+                        column: Some((0, name.into())),
+                    },
+                    message: format!("value {} is not finite (sample {i})", col[i]),
+                });
+            }
+        }
+        if let Some(i) = self.t.windows(2).position(|w| w[1] <= w[0]) {
+            return Err(Error::TimeNotIncreasing {
+                at: Location {
+                    file: self.source.clone(),
+                    line: i as u64 + 2,
+                    column: Some((0, "t".into())),
+                },
+                t: self.t[i + 1],
+                previous: self.t[i],
+            });
+        }
+        Ok(())
+    }
+
+    /// Reads a recording CSV file.
+    ///
+    /// # Errors
+    /// [`Error::Io`] if the file cannot be read; otherwise as [`Recording::from_csv_str`].
+    pub fn read_csv(path: impl AsRef<Path>) -> Result<Self> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
+            path: path.to_owned(),
+            source,
+        })?;
+        Self::from_csv_str(&text, path)
+    }
+
+    /// Parses recording CSV text; `source` names it in errors.
+    ///
+    /// # Errors
+    /// [`Error::MissingColumn`], [`Error::Malformed`] (ragged rows), [`Error::BadValue`]
+    /// (not a number, NaN, ±Inf), [`Error::TimeNotIncreasing`], each naming the file, line and
+    /// column; [`Error::TooShort`] if there is no data row.
+    pub fn from_csv_str(text: &str, source: impl Into<PathBuf>) -> Result<Self> {
+        let source: PathBuf = source.into();
+        let mut meta = Vec::new();
+        let mut offset = 0usize; // byte offset of the header line
+        let mut meta_lines = 0u64;
+        for line in text.split_inclusive('\n') {
+            let trimmed = line.trim_start();
+            if trimmed.starts_with('#') {
+                let body = trimmed.trim_start_matches('#').trim();
+                if let Some((k, v)) = body.split_once(':') {
+                    meta.push((k.trim().to_owned(), v.trim().to_owned()));
+                }
+            } else if !trimmed.trim().is_empty() {
+                break;
+            }
+            offset += line.len();
+            meta_lines += 1;
+        }
+        let body = &text[offset..];
+        let mut rdr = csv::ReaderBuilder::new()
+            .has_headers(true)
+            .trim(csv::Trim::All)
+            .from_reader(body.as_bytes());
+        let header_line = meta_lines + 1;
+        let headers = rdr
+            .headers()
+            .map_err(|e| csv_error(&source, meta_lines, &e))?
+            .clone();
+        let header_text = headers.iter().collect::<Vec<_>>().join(",");
+        let find = |name: &str| headers.iter().position(|h| h == name);
+        let mut req_idx = [0usize; 5];
+        for (slot, name) in req_idx.iter_mut().zip(REQUIRED) {
+            *slot = find(name).ok_or_else(|| Error::MissingColumn {
+                file: source.clone(),
+                line: header_line,
+                column: name.into(),
+                header: header_text.clone(),
+            })?;
+        }
+        let opt_idx: Vec<Option<usize>> = OPTIONAL.iter().map(|n| find(n)).collect();
+        let mut req: [Vec<f64>; 5] = Default::default();
+        let mut opt: Vec<Option<Vec<f64>>> =
+            opt_idx.iter().map(|i| i.map(|_| Vec::new())).collect();
+        let mut record = csv::StringRecord::new();
+        let mut lines: Vec<u64> = Vec::new();
+        loop {
+            match rdr.read_record(&mut record) {
+                Ok(false) => break,
+                Ok(true) => {}
+                Err(e) => return Err(csv_error(&source, meta_lines, &e)),
+            }
+            let line = record.position().map_or(0, |p| p.line()) + meta_lines;
+            let cell = |i: usize, name: &str| -> Result<f64> {
+                let at = || Location {
+                    file: source.clone(),
+                    line,
+                    column: Some((i + 1, name.to_owned())),
+                };
+                let raw = record.get(i).unwrap_or("");
+                let x: f64 = raw.parse().map_err(|_| Error::BadValue {
+                    at: at(),
+                    message: format!("`{raw}` is not a number"),
+                })?;
+                if !x.is_finite() {
+                    return Err(Error::BadValue {
+                        at: at(),
+                        message: format!("`{raw}` is not finite"),
+                    });
+                }
+                Ok(x)
+            };
+            for ((col, &i), name) in req.iter_mut().zip(&req_idx).zip(REQUIRED) {
+                col.push(cell(i, name)?);
+            }
+            for ((col, i), name) in opt.iter_mut().zip(&opt_idx).zip(OPTIONAL) {
+                if let (Some(col), Some(i)) = (col.as_mut(), i) {
+                    col.push(cell(*i, name)?);
+                }
+            }
+            if let [.., a, b] = req[0].as_slice()
+                && b <= a
+            {
+                return Err(Error::TimeNotIncreasing {
+                    at: Location {
+                        file: source.clone(),
+                        line,
+                        column: Some((req_idx[0] + 1, "t".into())),
+                    },
+                    t: *b,
+                    previous: *a,
+                });
+            }
+            lines.push(line);
+        }
+        if lines.is_empty() {
+            return Err(Error::TooShort {
+                file: source,
+                samples: 0,
+                needed: 2,
+                why: "a recording needs data rows after the header".into(),
+            });
+        }
+        let [t, v_ref, w_ref, v, w] = req;
+        let mut opt = opt.into_iter();
+        let mut next = || opt.next().flatten();
+        Ok(Self {
+            source,
+            meta,
+            t,
+            v_ref,
+            w_ref,
+            v,
+            w,
+            x: next(),
+            y: next(),
+            phi: next(),
+            wl: next(),
+            wr: next(),
+        })
+    }
+
+    /// Renders the recording as CSV text (metadata lines, header, rows with full precision).
+    pub fn to_csv_string(&self) -> String {
+        let mut out = String::new();
+        for (k, v) in &self.meta {
+            out.push_str(&format!("# {k}: {v}\n"));
+        }
+        let mut cols: Vec<(&str, &[f64])> = vec![
+            ("t", &self.t),
+            ("v_ref", &self.v_ref),
+            ("w_ref", &self.w_ref),
+            ("v", &self.v),
+            ("w", &self.w),
+        ];
+        for (name, col) in OPTIONAL
+            .iter()
+            .zip([&self.x, &self.y, &self.phi, &self.wl, &self.wr])
+        {
+            if let Some(c) = col {
+                cols.push((name, c));
+            }
+        }
+        let header: Vec<&str> = cols.iter().map(|(n, _)| *n).collect();
+        out.push_str(&header.join(","));
+        out.push('\n');
+        for i in 0..self.len() {
+            let row: Vec<String> = cols.iter().map(|(_, c)| format!("{}", c[i])).collect();
+            out.push_str(&row.join(","));
+            out.push('\n');
+        }
+        out
+    }
+
+    /// Writes the recording as CSV, atomically: to a temporary file beside `path`, then renamed,
+    /// so that a failure never leaves a half-written file.
+    ///
+    /// # Errors
+    /// [`Error::Io`] naming `path`.
+    pub fn write_csv(&self, path: impl AsRef<Path>) -> Result<()> {
+        write_atomic(path.as_ref(), self.to_csv_string().as_bytes())
+    }
+}
+
+/// Writes `bytes` to `path` atomically (temporary file in the same directory, then rename).
+///
+/// # Errors
+/// [`Error::Io`] naming `path`.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    let io = |source| Error::Io {
+        path: path.to_owned(),
+        source,
+    };
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let name = path
+        .file_name()
+        .map_or_else(|| "out".into(), |n| n.to_string_lossy().into_owned());
+    let tmp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
+    let result = (|| {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result.map_err(io)
+}
+
+/// For each grid time, the index i with t[i] ≤ g < t[i+1] and the fraction a ∈ [0, 1).
+fn bracket(t: &[f64], grid: &[f64]) -> Vec<(usize, f64)> {
+    let mut i = 0;
+    grid.iter()
+        .map(|&g| {
+            while i + 1 < t.len() && t[i + 1] <= g {
+                i += 1;
+            }
+            if i + 1 >= t.len() {
+                (t.len() - 1, 0.0)
+            } else {
+                (i, ((g - t[i]) / (t[i + 1] - t[i])).clamp(0.0, 1.0))
+            }
+        })
+        .collect()
+}
+
+fn csv_error(file: &Path, meta_lines: u64, e: &csv::Error) -> Error {
+    let line = e
+        .position()
+        .map_or(meta_lines + 1, |p| p.line() + meta_lines);
+    Error::Malformed {
+        at: Location {
+            file: file.to_owned(),
+            line,
+            column: None,
+        },
+        message: e.to_string(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const GOOD: &str = "# robot: test\n# command_hold: zoh\nt,v_ref,w_ref,v,w,extra\n0,1,2,3,4,x\n0.1,1,2,3,4,y\n0.2,1,2,3,4,z\n";
+
+    #[test]
+    fn reads_metadata_columns_and_ignores_extras() {
+        let r = Recording::from_csv_str(GOOD, "g.csv").expect("parses");
+        assert_eq!(r.len(), 3);
+        assert_eq!(r.meta("robot"), Some("test"));
+        assert_eq!(r.command_hold(), CommandHold::Zoh);
+        assert_eq!(r.v, vec![3.0; 3]);
+        assert!(r.x.is_none());
+    }
+
+    #[test]
+    fn round_trips_through_csv() {
+        let mut r = Recording::new(
+            "m",
+            vec![0.0, 0.1, 0.25],
+            vec![0.1, 0.2, 0.3],
+            vec![-1.0, 0.0, 1.0],
+            vec![0.123456789012345, 0.0, 1e-17],
+            vec![1.0, 2.0, 3.0],
+        )
+        .expect("valid");
+        r.phi = Some(vec![0.0, 0.5, 1.0]);
+        r.set_meta("robot", "pioneer3dx");
+        let back = Recording::from_csv_str(&r.to_csv_string(), "m").expect("parses");
+        assert_eq!(back, r);
+    }
+
+    #[test]
+    fn missing_column_names_file_line_and_column() {
+        let e = Recording::from_csv_str("# a: b\nt,v_ref,v,w\n0,1,2,3\n", "f.csv").unwrap_err();
+        let s = e.to_string();
+        assert!(
+            s.starts_with("f.csv:2: missing required column `w_ref`"),
+            "{s}"
+        );
+    }
+
+    #[test]
+    fn nan_and_text_cells_name_line_and_column() {
+        let text = "# m: 1\nt,v_ref,w_ref,v,w\n0,1,2,3,4\n0.1,1,NaN,3,4\n";
+        let s = Recording::from_csv_str(text, "f.csv")
+            .unwrap_err()
+            .to_string();
+        assert!(s.starts_with("f.csv:4:3 (column `w_ref`)"), "{s}");
+        let text = "t,v_ref,w_ref,v,w\n0,1,2,3,4\n0.1,1,2,abc,4\n";
+        let s = Recording::from_csv_str(text, "f.csv")
+            .unwrap_err()
+            .to_string();
+        assert!(s.starts_with("f.csv:3:4 (column `v`)"), "{s}");
+        let text = "t,v_ref,w_ref,v,w\n0,1,2,3,inf\n";
+        let s = Recording::from_csv_str(text, "f.csv")
+            .unwrap_err()
+            .to_string();
+        assert!(s.starts_with("f.csv:2:5 (column `w`)"), "{s}");
+    }
+
+    #[test]
+    fn time_must_increase() {
+        let text = "t,v_ref,w_ref,v,w\n0,1,2,3,4\n0.1,1,2,3,4\n0.1,1,2,3,4\n";
+        let s = Recording::from_csv_str(text, "f.csv")
+            .unwrap_err()
+            .to_string();
+        assert!(s.starts_with("f.csv:4:1 (column `t`)"), "{s}");
+    }
+
+    #[test]
+    fn ragged_row_is_malformed_with_line() {
+        let text = "t,v_ref,w_ref,v,w\n0,1,2,3,4\n0.1,1,2\n";
+        let e = Recording::from_csv_str(text, "f.csv").unwrap_err();
+        assert!(
+            matches!(e, Error::Malformed { ref at, .. } if at.line == 3),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn resampling_holds_commands_and_interpolates_measurements() {
+        let r = Recording::new(
+            "j",
+            vec![0.0, 0.09, 0.21, 0.3],
+            vec![1.0, 2.0, 3.0, 4.0],
+            vec![0.0; 4],
+            vec![0.0, 0.9, 2.1, 3.0],
+            vec![0.0; 4],
+        )
+        .expect("valid");
+        assert!(!r.sampling().uniform);
+        let u = r.resample_uniform(0.1).expect("resamples");
+        assert_eq!(u.len(), 4);
+        // t = 0.1 and 0.2: the last command sent (at 0.09) is 2; v = 10 t interpolates exactly.
+        assert_eq!(u.v_ref, vec![1.0, 2.0, 2.0, 4.0]);
+        for (v, t) in u.v.iter().zip(&u.t) {
+            approx::assert_abs_diff_eq!(*v, 10.0 * t, epsilon = 1e-12);
+        }
+        assert!(u.sampling().uniform);
+    }
+
+    #[test]
+    fn atomic_write_leaves_no_partial_file_on_failure() {
+        let dir = tempfile::tempdir().expect("tmp");
+        let missing = dir.path().join("no_such_dir").join("r.csv");
+        let r = Recording::from_csv_str(GOOD, "g").expect("parses");
+        assert!(matches!(r.write_csv(&missing), Err(Error::Io { .. })));
+        let ok = dir.path().join("r.csv");
+        r.write_csv(&ok).expect("writes");
+        assert_eq!(std::fs::read_dir(dir.path()).expect("ls").count(), 1);
+    }
+}
