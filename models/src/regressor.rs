@@ -60,12 +60,14 @@ pub const CHANNELS: [ChannelInfo; 2] = [
     },
 ];
 
-/// Builds the two filtered regressions of eq. 4.2 from conditioned data.
+/// Builds the two filtered regressions of eq. 4.2 from conditioned data, on the rows of
+/// [`Conditioned::valid_range`].
 ///
 /// # Errors
 /// [`wheelid_core::Error::TooShort`] if the recording is shorter than the filter padding.
 pub fn regression(data: &Conditioned) -> Result<Vec<ChannelRegression>> {
-    let n = data.len();
+    let keep = data.valid_range();
+    let n = keep.len();
     let vf = data.smooth(&data.v)?;
     let wf = data.smooth(&data.w)?;
     let dv = data.differentiate(&vf)?;
@@ -76,19 +78,20 @@ pub fn regression(data: &Conditioned) -> Result<Vec<ChannelRegression>> {
     let vwf = data.smooth(&vw)?;
     let yv = data.smooth(&data.v_ref)?;
     let yw = data.smooth(&data.w_ref)?;
-    let mat = |cols: [&Vec<f64>; 3]| DMatrix::from_fn(n, 3, |i, j| cols[j][i]);
+    let mat = |cols: [&Vec<f64>; 3]| DMatrix::from_fn(n, 3, |i, j| cols[j][keep.start + i]);
+    let kept = |y: &[f64]| DVector::from_column_slice(&y[keep.clone()]);
     Ok(vec![
         ChannelRegression {
             channel: "v",
             params: CHANNELS[0].params.to_vec(),
             x: mat([&dv, &w2f, &vf]),
-            y: DVector::from_vec(yv),
+            y: kept(&yv),
         },
         ChannelRegression {
             channel: "w",
             params: CHANNELS[1].params.to_vec(),
             x: mat([&dw, &vwf, &wf]),
-            y: DVector::from_vec(yw),
+            y: kept(&yw),
         },
     ])
 }

@@ -1,0 +1,197 @@
+//! The TOML files that identification writes and reads: the identified model (`--out`) and
+//! bounds on θ (`--bounds`).
+//!
+//! Identified model:
+//! ```toml
+//! model = "vw-pd"
+//! theta = [0.2604, 0.2509, -0.0005, 0.9965, 0.0026, 1.0768]
+//! std_err = [0.001, 0.001, 0.0001, 0.002, 0.0004, 0.003]
+//! cutoff_hz = 0.64
+//! [channels.v]
+//! r2 = 0.999
+//! fit_percent = 97.1
+//! ```
+//!
+//! Bounds, either on θ directly or as intervals on the physical constants of the chosen model
+//! (`wheelid_models::physical`), which are turned into exact θ bounds:
+//! ```toml
+//! theta_lower = [0.1, 0.1, -0.1, 0.8, -0.1, 0.8]
+//! theta_upper = [0.5, 0.5,  0.1, 1.2,  0.1, 1.2]
+//! # or
+//! [physical.lower]
+//! m = 8.0
+//! # … every constant of the model
+//! [physical.upper]
+//! m = 9.0
+//! ```
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+use wheelid_models::{Parameterization, VwPdMap, WheelPdMap};
+
+use crate::identify::Identification;
+
+/// Per-channel quality in the model file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ChannelQuality {
+    /// R² of the regression.
+    pub r2: f64,
+    /// Free-run fit %.
+    pub fit_percent: f64,
+}
+
+/// An identified model as written by `--out` and read back by later commands.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ModelFile {
+    /// Model name (`wheel-pd`, `vw-pd`).
+    pub model: String,
+    /// θ1…θ6.
+    pub theta: Vec<f64>,
+    /// Standard errors.
+    pub std_err: Vec<f64>,
+    /// Cut-off used [Hz].
+    pub cutoff_hz: f64,
+    /// Samples used.
+    pub samples: usize,
+    /// Per-channel quality.
+    pub channels: BTreeMap<String, ChannelQuality>,
+}
+
+impl ModelFile {
+    /// The file content of an identification.
+    pub fn from_identification(id: &Identification) -> Self {
+        Self {
+            model: id.model.clone(),
+            theta: id.theta.clone(),
+            std_err: id.std_err.clone(),
+            cutoff_hz: id.cutoff_hz,
+            samples: id.samples,
+            channels: id
+                .channels
+                .iter()
+                .map(|c| {
+                    (
+                        c.name.clone(),
+                        ChannelQuality {
+                            r2: c.r2,
+                            fit_percent: c.fit_percent,
+                        },
+                    )
+                })
+                .collect(),
+        }
+    }
+
+    /// Writes the file atomically.
+    ///
+    /// # Errors
+    /// I/O or serialisation errors, naming the path.
+    pub fn write(&self, path: &Path) -> anyhow::Result<()> {
+        let text = toml::to_string(self)?;
+        wheelid_core::recording::write_atomic(path, text.as_bytes())?;
+        Ok(())
+    }
+
+    /// Reads a model file.
+    ///
+    /// # Errors
+    /// I/O errors or TOML errors with the file, line and column.
+    pub fn read(path: &Path) -> anyhow::Result<Self> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        let m: Self = toml::from_str(&text)
+            .map_err(|e| anyhow::anyhow!("{}: {}", path.display(), toml_msg(&text, &e)))?;
+        if m.theta.len() != 6 {
+            anyhow::bail!(
+                "{}: theta must have 6 values, has {}",
+                path.display(),
+                m.theta.len()
+            );
+        }
+        Ok(m)
+    }
+}
+
+/// A TOML error as `line L, column C: message`.
+pub fn toml_msg(text: &str, e: &toml::de::Error) -> String {
+    match e.span() {
+        Some(span) => {
+            let before = &text[..span.start.min(text.len())];
+            let line = before.matches('\n').count() + 1;
+            let col = before.len() - before.rfind('\n').map_or(0, |i| i + 1) + 1;
+            format!("line {line}, column {col}: {}", e.message())
+        }
+        None => e.message().to_owned(),
+    }
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct BoundsFile {
+    theta_lower: Option<Vec<f64>>,
+    theta_upper: Option<Vec<f64>>,
+    physical: Option<PhysicalBounds>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PhysicalBounds {
+    lower: toml::Value,
+    upper: toml::Value,
+}
+
+/// Reads a bounds file for `model` and returns (lower, upper) per θ.
+///
+/// # Errors
+/// I/O, TOML (with line and column), wrong lengths, or physical intervals that do not fit the
+/// model's constants.
+pub fn read_bounds(path: &Path, model: &str) -> anyhow::Result<Vec<(f64, f64)>> {
+    let text =
+        std::fs::read_to_string(path).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    let f: BoundsFile = toml::from_str(&text)
+        .map_err(|e| anyhow::anyhow!("{}: {}", path.display(), toml_msg(&text, &e)))?;
+    let ctx = |m: String| anyhow::anyhow!("{}: {m}", path.display());
+    match (f.theta_lower, f.theta_upper, f.physical) {
+        (Some(lo), Some(hi), None) => {
+            if lo.len() != 6 || hi.len() != 6 {
+                return Err(ctx("theta_lower and theta_upper need 6 values each".into()));
+            }
+            Ok(lo.into_iter().zip(hi).collect())
+        }
+        (None, None, Some(p)) => {
+            let b = match model {
+                "vw-pd" => VwPdMap::theta_bounds(
+                    &p.lower.try_into().map_err(|e: toml::de::Error| {
+                        ctx(format!("[physical.lower]: {}", e.message()))
+                    })?,
+                    &p.upper.try_into().map_err(|e: toml::de::Error| {
+                        ctx(format!("[physical.upper]: {}", e.message()))
+                    })?,
+                ),
+                "wheel-pd" => WheelPdMap::theta_bounds(
+                    &p.lower.try_into().map_err(|e: toml::de::Error| {
+                        ctx(format!("[physical.lower]: {}", e.message()))
+                    })?,
+                    &p.upper.try_into().map_err(|e: toml::de::Error| {
+                        ctx(format!("[physical.upper]: {}", e.message()))
+                    })?,
+                ),
+                other => {
+                    return Err(ctx(format!(
+                        "model `{other}` has no physical parameterization"
+                    )));
+                }
+            }
+            .map_err(|e| ctx(e.to_string()))?;
+            Ok(b.to_vec())
+        }
+        _ => Err(ctx(
+            "give either theta_lower and theta_upper, or [physical.lower] and [physical.upper]"
+                .into(),
+        )),
+    }
+}

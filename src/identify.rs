@@ -1,0 +1,385 @@
+//! The identification run: recordings in, θ with its uncertainty and the fit out.
+//!
+//! One walk through the layers, each crossed once:
+//! 1. **condition** every recording on its own (`wheelid_core::condition`: resample, align,
+//!    filter — with one cut-off for the run, chosen by the documented rule unless given);
+//! 2. **model**: build each recording's regression (eq. 4.2) and stack them per channel;
+//! 3. **fit** each channel's stacked problem with the solver (eq. 4.3–4.7, by SVD or
+//!    with bounds);
+//! 4. **validate**: simulate the identified model free-run from each recording's commands and
+//!    compare with the measurements (fit %, as MATLAB's `compare`); estimate θ4 and θ6 from
+//!    steady constant-command segments as the thesis's §4.1 suggests.
+
+use std::path::PathBuf;
+
+use nalgebra::{DMatrix, DVector};
+use serde::Serialize;
+use wheelid_core::condition::{self, ConditionSettings, CutoffChoice};
+use wheelid_core::{
+    BoundState, ChannelRegression, Conditioned, LinearProblem, Recording, RegressorModel,
+    SolveError, Solver, metrics,
+};
+
+/// Errors of an identification run.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum IdentifyError {
+    /// Reading or conditioning a recording failed.
+    #[error(transparent)]
+    Core(#[from] wheelid_core::Error),
+    /// A channel's least-squares problem could not be solved.
+    #[error("channel `{channel}`: {source}")]
+    Solve {
+        /// The channel.
+        channel: String,
+        /// Why.
+        #[source]
+        source: SolveError,
+    },
+    /// Unknown model or solver name, or bad bounds.
+    #[error("{0}")]
+    Setting(String),
+}
+
+/// Settings of an identification run (separate from its result, [`Identification`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct IdentifySettings {
+    /// Conditioning (cut-off, filter order, derivative stencil).
+    pub condition: ConditionSettings,
+    /// Bounds on θ (lower, upper) for bounded solvers, one per parameter.
+    pub bounds: Option<Vec<(f64, f64)>>,
+}
+
+impl Default for IdentifySettings {
+    fn default() -> Self {
+        Self {
+            condition: ConditionSettings::default(),
+            bounds: None,
+        }
+    }
+}
+
+/// One recording's part in the run.
+#[derive(Debug, Clone, Serialize)]
+pub struct FileReport {
+    /// Where it came from.
+    pub source: PathBuf,
+    /// Samples used (after resampling).
+    pub samples: usize,
+    /// Sample period [s].
+    pub dt: f64,
+    /// Median period before resampling [s], if it was resampled onto a uniform grid.
+    pub resampled_from: Option<f64>,
+    /// Free-run fit % per channel on this recording.
+    pub fit_percent: Vec<f64>,
+}
+
+/// Per-channel fit quality.
+#[derive(Debug, Clone, Serialize)]
+pub struct ChannelReport {
+    /// Channel name (`v`, `w`).
+    pub name: String,
+    /// R² of the (filtered) regression.
+    pub r2: f64,
+    /// Free-run fit % over all recordings: 100·(1 − ‖y − ŷ‖/‖y − ȳ‖).
+    pub fit_percent: f64,
+    /// Condition number of the column-normalised regressor.
+    pub condition_number: f64,
+    /// Samples in the stacked regression.
+    pub samples: usize,
+}
+
+/// The steady-state estimate of θ4 or θ6 (thesis §4.1, last paragraph).
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct SteadyStateEstimate {
+    /// Duration-weighted mean of the ratios over the segments.
+    pub value: f64,
+    /// Number of constant-command segments used.
+    pub segments: usize,
+    /// Total settled time used [s].
+    pub seconds: f64,
+}
+
+/// Data behind the plots: one recording's measured and simulated outputs.
+#[derive(Debug, Clone)]
+pub struct FileSeries {
+    /// Source.
+    pub source: PathBuf,
+    /// Time [s].
+    pub t: Vec<f64>,
+    /// Measured outputs per channel.
+    pub measured: Vec<Vec<f64>>,
+    /// Simulated (free-run) outputs per channel.
+    pub simulated: Vec<Vec<f64>>,
+}
+
+/// The result of an identification run.
+#[derive(Debug, Clone)]
+pub struct Identification {
+    /// Model name.
+    pub model: String,
+    /// Solver name.
+    pub solver: String,
+    /// Parameter names.
+    pub param_names: Vec<String>,
+    /// Parameter units.
+    pub param_units: Vec<String>,
+    /// θ̂.
+    pub theta: Vec<f64>,
+    /// Standard errors of θ̂ (Newey–West over the filter's correlation length).
+    pub std_err: Vec<f64>,
+    /// Per-parameter bound state.
+    pub bound_state: Vec<BoundState>,
+    /// Cut-off used [Hz].
+    pub cutoff_hz: f64,
+    /// How it was chosen.
+    pub cutoff_choice: CutoffChoice,
+    /// Filter order used.
+    pub filter_order: usize,
+    /// Total samples.
+    pub samples: usize,
+    /// Per-channel quality.
+    pub channels: Vec<ChannelReport>,
+    /// Per-file details.
+    pub files: Vec<FileReport>,
+    /// θ4 from steady forward segments, if any.
+    pub steady_theta4: Option<SteadyStateEstimate>,
+    /// θ6 from steady turning segments, if any.
+    pub steady_theta6: Option<SteadyStateEstimate>,
+    /// Measured vs simulated series, for plots.
+    pub series: Vec<FileSeries>,
+    /// Stacked regressions per channel (for the regression plots).
+    pub regressions: Vec<ChannelRegression>,
+}
+
+/// Runs an identification of `model` with `solver` on `recordings` (one multi-experiment
+/// problem: each recording conditioned on its own, regressions stacked).
+///
+/// # Errors
+/// [`IdentifyError`] for unreadable or too-short data, a rank-deficient or infeasible problem.
+pub fn identify(
+    recordings: &[Recording],
+    model: &dyn RegressorModel,
+    solver: &dyn Solver,
+    settings: &IdentifySettings,
+) -> Result<Identification, IdentifyError> {
+    if recordings.is_empty() {
+        return Err(IdentifyError::Setting("no recording given".into()));
+    }
+    // 1. condition
+    let uniform: Vec<(Recording, Option<f64>)> = recordings
+        .iter()
+        .map(condition::make_uniform)
+        .collect::<Result<_, _>>()?;
+    let (cutoff_hz, cutoff_choice) = match settings.condition.cutoff_hz {
+        Some(fc) => (fc, CutoffChoice::Given),
+        None => condition::suggest_cutoff(&uniform.iter().map(|(r, _)| r).collect::<Vec<_>>())?,
+    };
+    let conditioned: Vec<Conditioned> = uniform
+        .iter()
+        .map(|(r, from)| condition::condition(r, *from, cutoff_hz, &settings.condition))
+        .collect::<Result<_, _>>()?;
+    // 2. model
+    let per_file: Vec<Vec<ChannelRegression>> = conditioned
+        .iter()
+        .map(|c| model.regression(c))
+        .collect::<Result<_, _>>()?;
+    let regressions = stack(&per_file);
+    // 3. fit
+    let p = model.params().len();
+    let names: Vec<&str> = model.params().iter().map(|q| q.name).collect();
+    let mut theta = vec![0.0; p];
+    let mut std_err = vec![0.0; p];
+    let mut bound_state = vec![BoundState::Free; p];
+    let mut channel_quality = Vec::new();
+    // Residuals of filtered data are correlated over about one filter time constant.
+    let lags = conditioned
+        .iter()
+        .map(|c| (1.0 / (c.dt * cutoff_hz)).ceil() as usize)
+        .max()
+        .unwrap_or(0);
+    for reg in &regressions {
+        let ch_names: Vec<&str> = reg.params.iter().map(|&i| names[i]).collect();
+        let ch_bounds: Option<Vec<(f64, f64)>> = settings
+            .bounds
+            .as_ref()
+            .map(|b| reg.params.iter().map(|&i| b[i]).collect());
+        let problem = LinearProblem {
+            x: &reg.x,
+            y: &reg.y,
+            names: &ch_names,
+            bounds: ch_bounds.as_deref(),
+            correlation_lags: lags,
+        };
+        let fit = solver
+            .solve(&problem)
+            .map_err(|source| IdentifyError::Solve {
+                channel: reg.channel.into(),
+                source,
+            })?;
+        for (j, &i) in reg.params.iter().enumerate() {
+            theta[i] = fit.theta[j];
+            std_err[i] = fit.std_err[j];
+            bound_state[i] = fit.bound_state[j];
+        }
+        let yhat = &reg.x * &fit.theta;
+        channel_quality.push((
+            metrics::r_squared(reg.y.as_slice(), yhat.as_slice()),
+            fit.condition_number,
+            reg.y.len(),
+        ));
+    }
+    // 4. validate: free-run simulation per recording.
+    let nch = model.channels().len();
+    let mut series = Vec::new();
+    let mut files = Vec::new();
+    let mut all_meas = vec![Vec::new(); nch];
+    let mut all_sim = vec![Vec::new(); nch];
+    for c in &conditioned {
+        let rec = &c.recording;
+        let measured = vec![rec.v.clone(), rec.w.clone()];
+        let initial = [c.smooth(&c.v)?[0], c.smooth(&c.w)?[0]];
+        let simulated = model.simulate(&theta, rec, &initial)?;
+        let fits: Vec<f64> = (0..nch)
+            .map(|ch| metrics::fit_percent(&measured[ch], &simulated[ch]))
+            .collect();
+        for ch in 0..nch {
+            all_meas[ch].extend_from_slice(&measured[ch]);
+            all_sim[ch].extend_from_slice(&simulated[ch]);
+        }
+        files.push(FileReport {
+            source: c.source.clone(),
+            samples: c.len(),
+            dt: c.dt,
+            resampled_from: c.resampled_from,
+            fit_percent: fits,
+        });
+        series.push(FileSeries {
+            source: c.source.clone(),
+            t: rec.t.clone(),
+            measured,
+            simulated,
+        });
+    }
+    let channels = model
+        .channels()
+        .iter()
+        .zip(&channel_quality)
+        .enumerate()
+        .map(|(ch, (info, &(r2, cond, n)))| ChannelReport {
+            name: info.name.into(),
+            r2,
+            fit_percent: metrics::fit_percent(&all_meas[ch], &all_sim[ch]),
+            condition_number: cond,
+            samples: n,
+        })
+        .collect();
+    let (steady_theta4, steady_theta6) = steady_state(&conditioned, &theta);
+    Ok(Identification {
+        model: model.name().into(),
+        solver: solver.name().into(),
+        param_names: names.iter().map(|s| (*s).to_owned()).collect(),
+        param_units: model.params().iter().map(|q| q.unit.to_owned()).collect(),
+        theta,
+        std_err,
+        bound_state,
+        cutoff_hz,
+        cutoff_choice,
+        filter_order: settings.condition.order,
+        samples: conditioned.iter().map(Conditioned::len).sum(),
+        channels,
+        files,
+        steady_theta4,
+        steady_theta6,
+        series,
+        regressions,
+    })
+}
+
+/// Stacks per-file regressions channel by channel (rows of file 1, then file 2, …).
+fn stack(per_file: &[Vec<ChannelRegression>]) -> Vec<ChannelRegression> {
+    let Some(first) = per_file.first() else {
+        return Vec::new();
+    };
+    first
+        .iter()
+        .enumerate()
+        .map(|(ch, proto)| {
+            let n: usize = per_file.iter().map(|f| f[ch].y.len()).sum();
+            let k = proto.x.ncols();
+            let mut x = DMatrix::zeros(n, k);
+            let mut y = DVector::zeros(n);
+            let mut row = 0;
+            for f in per_file {
+                let r = &f[ch];
+                x.view_mut((row, 0), (r.y.len(), k)).copy_from(&r.x);
+                y.rows_mut(row, r.y.len()).copy_from(&r.y);
+                row += r.y.len();
+            }
+            ChannelRegression {
+                channel: proto.channel,
+                params: proto.params.clone(),
+                x,
+                y,
+            }
+        })
+        .collect()
+}
+
+/// θ4 and θ6 from constant-command segments (thesis §4.1): in a segment where v_ref and ω_ref
+/// stay constant, after 3 time constants (θ1/θ4 resp. θ2/θ6 from the regression, at least 0.5 s)
+/// the model's steady state gives θ4 = (v_ref + θ3 ω²)/v and θ6 = (ω_ref − θ5 v ω)/ω; the
+/// θ3, θ5 corrections vanish on straight or pure-turn segments, which is the thesis's setting.
+/// Segments need ≥ 1 s of settled data and |v| ≥ 0.05 m/s (|ω| ≥ 0.05 rad/s).
+fn steady_state(
+    data: &[Conditioned],
+    theta: &[f64],
+) -> (Option<SteadyStateEstimate>, Option<SteadyStateEstimate>) {
+    let tau_v = (theta[0] / theta[3]).abs().max(0.5);
+    let tau_w = (theta[1] / theta[5]).abs().max(0.5);
+    let mut acc = [(0.0, 0usize, 0.0), (0.0, 0usize, 0.0)];
+    for c in data {
+        let rec = &c.recording;
+        let n = rec.len();
+        let mut start = 0;
+        while start < n {
+            let mut end = start + 1;
+            while end < n
+                && (rec.v_ref[end] - rec.v_ref[start]).abs() < 1e-9
+                && (rec.w_ref[end] - rec.w_ref[start]).abs() < 1e-9
+            {
+                end += 1;
+            }
+            for (ch, tau) in [(0usize, tau_v), (1, tau_w)] {
+                let settle = start + (3.0 * tau / c.dt).ceil() as usize;
+                if settle + (1.0 / c.dt) as usize > end {
+                    continue;
+                }
+                let m = (end - settle) as f64;
+                let v = rec.v[settle..end].iter().sum::<f64>() / m;
+                let w = rec.w[settle..end].iter().sum::<f64>() / m;
+                let (num, den) = if ch == 0 {
+                    (rec.v_ref[start] + theta[2] * w * w, v)
+                } else {
+                    (rec.w_ref[start] - theta[4] * v * w, w)
+                };
+                if den.abs() < 0.05 {
+                    continue;
+                }
+                let secs = m * c.dt;
+                acc[ch].0 += num / den * secs;
+                acc[ch].1 += 1;
+                acc[ch].2 += secs;
+            }
+            start = end;
+        }
+    }
+    let out = |(sum, segs, secs): (f64, usize, f64)| {
+        (segs > 0).then(|| SteadyStateEstimate {
+            value: sum / secs,
+            segments: segs,
+            seconds: secs,
+        })
+    };
+    (out(acc[0]), out(acc[1]))
+}

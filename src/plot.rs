@@ -1,0 +1,179 @@
+//! PNG plots of an identification (plotters, pure-Rust bitmap backend with an embedded DejaVu
+//! font, so no system font library is needed):
+//! * `response_<file>.png`: measured vs free-run simulated v and ω against time;
+//! * `regression.png`: the regression of Fig. 4.15 as partial-residual plots — for channel c
+//!   and regressor j, y − Σ_{i≠j} θ_i x_i against x_j, with the fitted line of slope θ_j.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use plotters::prelude::*;
+use plotters::style::FontStyle;
+
+use crate::identify::Identification;
+
+const MAX_POINTS: usize = 4000;
+
+fn register_font() {
+    use std::sync::Once;
+    static ONCE: Once = Once::new();
+    ONCE.call_once(|| {
+        // Only fails for a malformed font, and DejaVu is well formed.
+        let _ = plotters::style::register_font(
+            "sans-serif",
+            FontStyle::Normal,
+            dejavu::sans::regular(),
+        );
+    });
+}
+
+fn range(xs: impl Iterator<Item = f64> + Clone) -> (f64, f64) {
+    let (lo, hi) = xs.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| {
+        (a.min(x), b.max(x))
+    });
+    if !lo.is_finite() || !hi.is_finite() {
+        return (0.0, 1.0);
+    }
+    let pad = ((hi - lo) * 0.05).max(1e-9);
+    (lo - pad, hi + pad)
+}
+
+fn stem(p: &Path, i: usize) -> String {
+    let s = p
+        .file_stem()
+        .map_or_else(|| format!("{i}"), |s| s.to_string_lossy().into_owned());
+    s.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
+/// Writes the plots into `dir` (created if needed); returns the files written.
+///
+/// # Errors
+/// If the directory cannot be created or a PNG cannot be written.
+pub fn write_plots(id: &Identification, dir: &Path) -> Result<Vec<PathBuf>> {
+    register_font();
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let mut out = Vec::new();
+    let labels = [("v [m/s]", "v"), ("ω [rad/s]", "ω")];
+    for (i, s) in id.series.iter().enumerate() {
+        let path = dir.join(format!("response_{}.png", stem(&s.source, i)));
+        {
+            let root = BitMapBackend::new(&path, (1200, 800)).into_drawing_area();
+            root.fill(&WHITE)?;
+            let panels = root.split_evenly((2, 1));
+            for (ch, area) in panels.iter().enumerate() {
+                let step = (s.t.len() / MAX_POINTS).max(1);
+                let (y0, y1) = range(s.measured[ch].iter().chain(&s.simulated[ch]).copied());
+                let (t0, t1) = (s.t[0], s.t[s.t.len() - 1]);
+                let fit = id.files[i].fit_percent[ch];
+                let mut chart = ChartBuilder::on(area)
+                    .caption(
+                        format!(
+                            "{} — {}: measured vs free-run simulation (fit {fit:.1} %)",
+                            s.source.display(),
+                            labels[ch].1
+                        ),
+                        ("sans-serif", 18),
+                    )
+                    .margin(10)
+                    .x_label_area_size(35)
+                    .y_label_area_size(60)
+                    .build_cartesian_2d(t0..t1, y0..y1)?;
+                chart
+                    .configure_mesh()
+                    .x_desc("t [s]")
+                    .y_desc(labels[ch].0)
+                    .draw()?;
+                chart
+                    .draw_series(LineSeries::new(
+                        s.t.iter()
+                            .zip(&s.measured[ch])
+                            .step_by(step)
+                            .map(|(a, b)| (*a, *b)),
+                        BLUE.stroke_width(1),
+                    ))?
+                    .label("measured")
+                    .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE));
+                chart
+                    .draw_series(LineSeries::new(
+                        s.t.iter()
+                            .zip(&s.simulated[ch])
+                            .step_by(step)
+                            .map(|(a, b)| (*a, *b)),
+                        RED.stroke_width(2),
+                    ))?
+                    .label("simulated")
+                    .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED));
+                chart
+                    .configure_series_labels()
+                    .background_style(WHITE.mix(0.8))
+                    .border_style(BLACK)
+                    .draw()?;
+            }
+            root.present()?;
+        }
+        out.push(path);
+    }
+    let path = dir.join("regression.png");
+    {
+        let root = BitMapBackend::new(&path, (1500, 900)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let xnames = [
+            ["v̇ [m/s²]", "−ω² [rad²/s²]", "v [m/s]"],
+            ["ω̇ [rad/s²]", "v·ω [m·rad/s²]", "ω [rad/s]"],
+        ];
+        let ynames = ["v_ref partial residual", "ω_ref partial residual"];
+        let cells = root.split_evenly((2, 3));
+        for (ch, reg) in id.regressions.iter().enumerate().take(2) {
+            let n = reg.y.len();
+            let step = (n / MAX_POINTS).max(1);
+            let th: Vec<f64> = reg.params.iter().map(|&i| id.theta[i]).collect();
+            for j in 0..reg.x.ncols() {
+                let pts: Vec<(f64, f64)> = (0..n)
+                    .step_by(step)
+                    .map(|r| {
+                        let others: f64 = (0..reg.x.ncols())
+                            .filter(|&i| i != j)
+                            .map(|i| reg.x[(r, i)] * th[i])
+                            .sum();
+                        (reg.x[(r, j)], reg.y[r] - others)
+                    })
+                    .collect();
+                let (x0, x1) = range(pts.iter().map(|p| p.0));
+                let (y0, y1) = range(pts.iter().map(|p| p.1).chain([x0 * th[j], x1 * th[j]]));
+                let mut chart = ChartBuilder::on(&cells[ch * 3 + j])
+                    .caption(
+                        format!("{} = {:.4}", id.param_names[reg.params[j]], th[j]),
+                        ("sans-serif", 18),
+                    )
+                    .margin(8)
+                    .x_label_area_size(35)
+                    .y_label_area_size(55)
+                    .build_cartesian_2d(x0..x1, y0..y1)?;
+                chart
+                    .configure_mesh()
+                    .x_desc(xnames[ch][j])
+                    .y_desc(ynames[ch])
+                    .draw()?;
+                chart.draw_series(
+                    pts.iter()
+                        .map(|p| Circle::new(*p, 1, BLUE.mix(0.4).filled())),
+                )?;
+                chart.draw_series(LineSeries::new(
+                    [(x0, x0 * th[j]), (x1, x1 * th[j])],
+                    RED.stroke_width(2),
+                ))?;
+            }
+        }
+        root.present()?;
+    }
+    out.push(path);
+    Ok(out)
+}
