@@ -42,21 +42,12 @@ pub enum IdentifyError {
 }
 
 /// Settings of an identification run (separate from its result, [`Identification`]).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct IdentifySettings {
     /// Conditioning (cut-off, filter order, derivative stencil).
     pub condition: ConditionSettings,
     /// Bounds on θ (lower, upper) for bounded solvers, one per parameter.
     pub bounds: Option<Vec<(f64, f64)>>,
-}
-
-impl Default for IdentifySettings {
-    fn default() -> Self {
-        Self {
-            condition: ConditionSettings::default(),
-            bounds: None,
-        }
-    }
 }
 
 /// One recording's part in the run.

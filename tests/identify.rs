@@ -143,8 +143,8 @@ fn multi_file_run_equals_the_stacked_regression() {
             WheelPd.regression(&c).expect("regression")
         })
         .collect();
-    for ch in 0..2 {
-        let (x1, x2) = (&regs[0][ch].x, &regs[1][ch].x);
+    for (r0, r1) in regs[0].iter().zip(&regs[1]) {
+        let (x1, x2) = (&r0.x, &r1.x);
         let x = DMatrix::from_fn(x1.nrows() + x2.nrows(), 3, |i, j| {
             if i < x1.nrows() {
                 x1[(i, j)]
@@ -154,7 +154,7 @@ fn multi_file_run_equals_the_stacked_regression() {
         });
         let y = DVector::from_iterator(
             x.nrows(),
-            regs[0][ch].y.iter().chain(regs[1][ch].y.iter()).copied(),
+            r0.y.iter().chain(r1.y.iter()).copied(),
         );
         let p = LinearProblem {
             x: &x,
@@ -164,7 +164,7 @@ fn multi_file_run_equals_the_stacked_regression() {
             correlation_lags: 0,
         };
         let fit = Ols::default().solve(&p).expect("solves");
-        for (j, &i) in regs[0][ch].params.iter().enumerate() {
+        for (j, &i) in r0.params.iter().enumerate() {
             approx::assert_relative_eq!(id.theta[i], fit.theta[j], max_relative = 1e-12);
         }
     }

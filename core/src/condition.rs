@@ -317,7 +317,7 @@ mod tests {
     #[test]
     fn too_short_names_the_file() {
         let r = rec(10, 0.1);
-        let e = condition(&r, None, 0.5, &ConditionSettings::default()).unwrap_err();
+        let e = condition(&r, None, 0.5, &ConditionSettings::default()).expect_err("must fail");
         assert!(
             e.to_string()
                 .starts_with("r.csv: 10 samples, but 16 are needed"),

@@ -587,7 +587,7 @@ mod tests {
 
     #[test]
     fn missing_column_names_file_line_and_column() {
-        let e = Recording::from_csv_str("# a: b\nt,v_ref,v,w\n0,1,2,3\n", "f.csv").unwrap_err();
+        let e = Recording::from_csv_str("# a: b\nt,v_ref,v,w\n0,1,2,3\n", "f.csv").expect_err("must fail");
         let s = e.to_string();
         assert!(
             s.starts_with("f.csv:2: missing required column `w_ref`"),
@@ -599,17 +599,17 @@ mod tests {
     fn nan_and_text_cells_name_line_and_column() {
         let text = "# m: 1\nt,v_ref,w_ref,v,w\n0,1,2,3,4\n0.1,1,NaN,3,4\n";
         let s = Recording::from_csv_str(text, "f.csv")
-            .unwrap_err()
+            .expect_err("must fail")
             .to_string();
         assert!(s.starts_with("f.csv:4:3 (column `w_ref`)"), "{s}");
         let text = "t,v_ref,w_ref,v,w\n0,1,2,3,4\n0.1,1,2,abc,4\n";
         let s = Recording::from_csv_str(text, "f.csv")
-            .unwrap_err()
+            .expect_err("must fail")
             .to_string();
         assert!(s.starts_with("f.csv:3:4 (column `v`)"), "{s}");
         let text = "t,v_ref,w_ref,v,w\n0,1,2,3,inf\n";
         let s = Recording::from_csv_str(text, "f.csv")
-            .unwrap_err()
+            .expect_err("must fail")
             .to_string();
         assert!(s.starts_with("f.csv:2:5 (column `w`)"), "{s}");
     }
@@ -618,7 +618,7 @@ mod tests {
     fn time_must_increase() {
         let text = "t,v_ref,w_ref,v,w\n0,1,2,3,4\n0.1,1,2,3,4\n0.1,1,2,3,4\n";
         let s = Recording::from_csv_str(text, "f.csv")
-            .unwrap_err()
+            .expect_err("must fail")
             .to_string();
         assert!(s.starts_with("f.csv:4:1 (column `t`)"), "{s}");
     }
@@ -626,7 +626,7 @@ mod tests {
     #[test]
     fn ragged_row_is_malformed_with_line() {
         let text = "t,v_ref,w_ref,v,w\n0,1,2,3,4\n0.1,1,2\n";
-        let e = Recording::from_csv_str(text, "f.csv").unwrap_err();
+        let e = Recording::from_csv_str(text, "f.csv").expect_err("must fail");
         assert!(
             matches!(e, Error::Malformed { ref at, .. } if at.line == 3),
             "{e}"

@@ -130,7 +130,7 @@ macro_rules! constants {
         #[serde(deny_unknown_fields)]
         pub struct $name { $($(#[$fm])* pub $f: f64,)* }
         impl $name {
-            fn to_vec(&self) -> Vec<f64> { vec![$(self.$f),*] }
+            fn to_vec(self) -> Vec<f64> { vec![$(self.$f),*] }
             fn from_vec(x: &[f64]) -> Self {
                 let mut it = x.iter().copied();
                 Self { $($f: it.next().unwrap_or(f64::NAN),)* }
