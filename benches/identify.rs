@@ -13,16 +13,30 @@ use wheelid::solvers::Ols;
 
 fn bench_identify(c: &mut Criterion) {
     let robot = RobotProfile::pioneer3dx();
-    let settings = SimSettings { duration_s: 99_999.9, substeps: 4, ..SimSettings::default() };
-    let rec = simulate_recording(&robot, &Excitation::thesis_pioneer(), &settings).expect("simulates");
+    let settings = SimSettings {
+        duration_s: 99_999.9,
+        substeps: 4,
+        ..SimSettings::default()
+    };
+    let rec =
+        simulate_recording(&robot, &Excitation::thesis_pioneer(), &settings).expect("simulates");
     assert_eq!(rec.len(), 1_000_000);
     if let Ok(path) = std::env::var("WHEELID_BENCH_CSV") {
-        rec.write_csv(&path).expect("writes the recording for the scipy comparison");
+        rec.write_csv(&path)
+            .expect("writes the recording for the scipy comparison");
     }
     let mut group = c.benchmark_group("identify");
     group.sample_size(10);
     group.bench_function("vw-pd ols, 1e6 rows", |b| {
-        b.iter(|| identify(std::slice::from_ref(&rec), &VwPd, &Ols::default(), &IdentifySettings::default()).expect("identifies"))
+        b.iter(|| {
+            identify(
+                std::slice::from_ref(&rec),
+                &VwPd,
+                &Ols::default(),
+                &IdentifySettings::default(),
+            )
+            .expect("identifies")
+        })
     });
     group.finish();
 }

@@ -152,10 +152,7 @@ fn multi_file_run_equals_the_stacked_regression() {
                 x2[(i - x1.nrows(), j)]
             }
         });
-        let y = DVector::from_iterator(
-            x.nrows(),
-            r0.y.iter().chain(r1.y.iter()).copied(),
-        );
+        let y = DVector::from_iterator(x.nrows(), r0.y.iter().chain(r1.y.iter()).copied());
         let p = LinearProblem {
             x: &x,
             y: &y,

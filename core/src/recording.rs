@@ -587,7 +587,8 @@ mod tests {
 
     #[test]
     fn missing_column_names_file_line_and_column() {
-        let e = Recording::from_csv_str("# a: b\nt,v_ref,v,w\n0,1,2,3\n", "f.csv").expect_err("must fail");
+        let e = Recording::from_csv_str("# a: b\nt,v_ref,v,w\n0,1,2,3\n", "f.csv")
+            .expect_err("must fail");
         let s = e.to_string();
         assert!(
             s.starts_with("f.csv:2: missing required column `w_ref`"),
