@@ -192,10 +192,10 @@ impl Recording {
                 uniform: true,
             };
         }
-        dts.sort_by(f64::total_cmp);
-        let dt_median = dts[dts.len() / 2];
-        let dt_min = dts[0];
-        let dt_max = dts[dts.len() - 1];
+        let dt_min = dts.iter().copied().fold(f64::INFINITY, f64::min);
+        let dt_max = dts.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let mid = dts.len() / 2;
+        let dt_median = *dts.select_nth_unstable_by(mid, f64::total_cmp).1;
         let tol = 1e-6 * dt_median;
         SamplingInfo {
             dt_median,
