@@ -11,8 +11,16 @@ import time
 import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
-d = np.genfromtxt(sys.argv[1], delimiter=",", names=True, comments="#")
-t, vr, wr, v, w = d["t"], d["v_ref"], d["w_ref"], d["v"], d["w"]
+with open(sys.argv[1]) as f:
+    meta = 0
+    for line in f:
+        if not line.startswith("#"):
+            header = line.strip().split(",")
+            break
+        meta += 1
+d = np.loadtxt(sys.argv[1], delimiter=",", skiprows=meta + 1)
+col = {name: d[:, i] for i, name in enumerate(header)}
+t, vr, wr, v, w = col["t"], col["v_ref"], col["w_ref"], col["v"], col["w"]
 dt = t[1] - t[0]
 
 
