@@ -7,6 +7,7 @@
 pub mod excitation;
 pub mod profile;
 pub mod simulator;
+pub mod trajectory;
 
 pub use excitation::{Excitation, SumOfSines};
 pub use profile::RobotProfile;

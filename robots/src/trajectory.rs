@@ -1,0 +1,1 @@
+//! Desired trajectories (Laut 2011 Appendix A). (being written)
