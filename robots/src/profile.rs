@@ -22,31 +22,59 @@ pub struct RobotProfile {
     pub speed_resolution: f64,
     /// Standard deviation of the wheel-speed measurement noise [m/s] per wheel.
     pub wheel_noise_std: f64,
+    /// Distance a [m] of the tracked point h ahead of the wheel axle (eq. 2.19; 0 puts h on
+    /// the axle, as the kinematic law of eq. 4.8 assumes).
+    #[serde(default)]
+    pub a: f64,
+    /// Mass [kg] (§4.3); informative, the dynamics are in θ.
+    pub mass_kg: f64,
+    /// Largest forward speed [m/s] (§4.3), the default level of the velocity-saturation effect.
+    pub v_max: f64,
+    /// Largest angular speed [rad/s], the default level of the velocity-saturation effect.
+    pub w_max: f64,
 }
 
 impl RobotProfile {
-    /// Pioneer 3-DX with the thesis's simulation θ (§4.2, Table 4.1 setting):
+    /// Pioneer 3-DX with the thesis's simulation θ (§4.2, Tables 4.1–4.2 "true" column, the
+    /// values of Martins et al. for a Pioneer 3-DX):
     /// θ = (0.2604, 0.2509, −0.000499, 0.9965, 0.00263, 1.0768).
-    /// Wheel radius 97.5 mm, track 381 mm; ARIA's 100 ms cycle; 128 encoder ticks per mm of
-    /// travel (ARIA `p3dx.p`, `TicksMM`); wheel speeds reported in whole mm/s as in the ARCOS
-    /// standard SIP; 2 mm/s of wheel-speed noise.
+    /// Wheel radius 97.5 mm, track 34 cm, mass 9 kg, 1.4 m/s (§4.3); 300 °/s turn rate (ARIA
+    /// default); ARIA's 100 ms cycle; 128 encoder ticks per mm of travel (ARIA `p3dx.p`,
+    /// `TicksMM`); wheel speeds reported in whole mm/s as in the ARCOS standard SIP; 2 mm/s of
+    /// wheel-speed noise.
     pub fn pioneer3dx() -> Self {
         let r = 0.0975;
         Self {
             name: "pioneer3dx".into(),
             theta: [0.2604, 0.2509, -0.000499, 0.9965, 0.00263, 1.0768],
             wheel_radius: r,
-            track: 0.381,
+            track: 0.34,
             period_s: 0.1,
             ticks_per_rev: 128_000.0 * 2.0 * std::f64::consts::PI * r,
             speed_resolution: 0.001,
             wheel_noise_std: 0.002,
+            a: 0.0,
+            mass_kg: 9.0,
+            v_max: 1.4,
+            w_max: 300f64.to_radians(),
+        }
+    }
+
+    /// The Pioneer 3-DX of Laut's lab, with the θ the thesis identified on it (§4.4.2):
+    /// θ = (0.2183, 0.1918, −0.0050, 0.9993, −0.0279, 1.0142); otherwise as
+    /// [`RobotProfile::pioneer3dx`].
+    pub fn pioneer3dx_laut() -> Self {
+        Self {
+            name: "pioneer3dx_laut".into(),
+            theta: [0.2183, 0.1918, -0.0050, 0.9993, -0.0279, 1.0142],
+            ..Self::pioneer3dx()
         }
     }
 
     /// Khepera III with the θ identified in the thesis (§4.4.1):
     /// θ = (0.0228, 0.0568, −0.0001, 1.0030, 0.0732, 0.9981); wheel radius 20.5 mm, track
-    /// 88.5 mm, 20 ms period, 2764 ticks per wheel revolution, 0.5 mm/s wheel-speed noise.
+    /// 88.5 mm (§4.3: 89 mm), mass 742 g, 0.5 m/s (§4.3) and so 2·0.5/0.0885 = 11.3 rad/s;
+    /// 20 ms period (§4.3), 2764 ticks per wheel revolution, 0.5 mm/s wheel-speed noise.
     pub fn khepera3() -> Self {
         Self {
             name: "khepera3".into(),
@@ -57,13 +85,21 @@ impl RobotProfile {
             ticks_per_rev: 2764.0,
             speed_resolution: 0.0,
             wheel_noise_std: 0.0005,
+            a: 0.0,
+            mass_kg: 0.742,
+            v_max: 0.5,
+            w_max: 2.0 * 0.5 / 0.0885,
         }
     }
 
-    /// The built-in profile called `name`.
+    /// The names [`RobotProfile::by_name`] knows.
+    pub const NAMES: [&'static str; 3] = ["pioneer3dx", "pioneer3dx_laut", "khepera3"];
+
+    /// The built-in profile called `name` (one of [`RobotProfile::NAMES`]).
     pub fn by_name(name: &str) -> Option<Self> {
         match name {
             "pioneer3dx" => Some(Self::pioneer3dx()),
+            "pioneer3dx_laut" => Some(Self::pioneer3dx_laut()),
             "khepera3" => Some(Self::khepera3()),
             _ => None,
         }

@@ -1,33 +1,51 @@
-//! The simulated robot: eq. 2.19 integrated at a fine step, driven by zero-order-held commands
-//! at the robot's period, measured through its encoders.
+//! The simulated robot: the 5-state model of eq. 2.19 integrated at a fine step, driven by
+//! commands held (zero-order hold) over the robot's period, measured through its encoders.
 //!
-//! Measurement model, per period Δt: each wheel's angle is integrated exactly (sub-step RK4),
-//! turned into whole encoder ticks, and the tick difference over the period gives the wheel
-//! speed averaged over the period (as a base controller computes it); Gaussian noise is added and
-//! the result rounded to the reported resolution (1 mm/s for a Pioneer SIP). v = (v_r + v_l)/2 and
-//! ω = (v_r − v_l)/d follow. The recording says `command_hold: zoh` and
-//! `velocity_sampling: window_average`. Pose by odometry with the second-order Runge–Kutta
-//! heading (thesis eq. 3.2–3.3).
+//! ```text
+//! ẋ = v cos ψ − a ω sin ψ      ẏ = v sin ψ + a ω cos ψ      ψ̇ = ω
+//! v̇ = (θ3/θ1) ω² − (θ4/θ1) v + (1/θ1) v_ref
+//! ω̇ = −(θ5/θ2) v ω − (θ6/θ2) ω + (1/θ2) ω_ref                         (eq. 2.19)
+//! ```
+//!
+//! (x, y) is the point h at distance `a` ahead of the axle ([`RobotProfile::a`]), ψ the
+//! heading. The state is advanced with classical fourth-order Runge–Kutta at `substeps` steps
+//! per period, and the optional [`Effects`] act inside that loop (see [`crate::effects`]).
+//!
+//! Measurement model ([`SimSettings::measurement_noise`] = true), per period Δt: each wheel's
+//! angle is integrated exactly (trapezoid of the sub-step wheel speeds (v ± dω/2)/r), turned into
+//! whole encoder ticks, and the tick difference over the period gives the wheel speed averaged
+//! over the period (as a base controller computes it); Gaussian noise is added and the result
+//! rounded to the reported resolution (1 mm/s for a Pioneer SIP). v = (v_r + v_l)/2 and
+//! ω = (v_r − v_l)/d follow. Pose by odometry from the same ticks (eq. 3.2–3.3, with the
+//! second-order Runge–Kutta heading φ̄ = φ + Δφ/2). Without the measurement model the robot
+//! reports its exact v, ω and pose.
+
+use std::collections::VecDeque;
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
-use wheelid_core::{Recording, Result};
+use serde::{Deserialize, Serialize};
+use wheelid_core::{Error, Recording, Result};
 
+use crate::effects::Effects;
 use crate::excitation::Excitation;
 use crate::profile::RobotProfile;
 
 /// Simulation settings.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
 pub struct SimSettings {
-    /// Duration [s].
+    /// Duration [s] (for [`simulate_recording`]).
     pub duration_s: f64,
-    /// Random seed for the noise.
+    /// Random seed for the noise and jitter.
     pub seed: u64,
     /// Integration sub-steps per period.
     pub substeps: usize,
-    /// Whether to apply the encoder model and noise (false: exact instantaneous v, ω).
+    /// Whether to apply the encoder model and noise (false: exact instantaneous v, ω, pose).
     pub measurement_noise: bool,
+    /// Optional physics the 6-θ model leaves out (all off by default).
+    pub effects: Effects,
 }
 
 impl Default for SimSettings {
@@ -37,82 +55,359 @@ impl Default for SimSettings {
             seed: 1,
             substeps: 50,
             measurement_noise: true,
+            effects: Effects::default(),
         }
     }
 }
 
-/// Simulates `profile` under `excitation` and returns the recording.
+/// What the robot reports at one sample instant.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Sample {
+    /// Time [s].
+    pub t: f64,
+    /// Measured forward velocity [m/s] (window average over the last period with encoders).
+    pub v: f64,
+    /// Measured angular velocity [rad/s].
+    pub w: f64,
+    /// Pose x of the point h [m] (odometry with encoders).
+    pub x: f64,
+    /// Pose y of the point h [m].
+    pub y: f64,
+    /// Heading [rad] (unwrapped).
+    pub phi: f64,
+}
+
+/// Smoothing of the Coulomb friction's sign: 2 mm/s and 0.01 rad/s.
+const FRICTION_EPS: [f64; 2] = [0.002, 0.01];
+
+/// A simulated differential-drive robot: send (v_ref, ω_ref), advance one period, read what its
+/// sensors report. Deterministic for a given seed.
+#[derive(Debug, Clone)]
+pub struct SimRobot {
+    profile: RobotProfile,
+    effects: Effects,
+    substeps: usize,
+    encoders: bool,
+    rng: ChaCha8Rng,
+    wheel_noise: Normal<f64>,
+    /// Current sample index and time [s].
+    k: usize,
+    t: f64,
+    /// True state (x, y, ψ, v, ω), (x, y) the point h.
+    s: [f64; 5],
+    /// Wheel angles (right, left) [rad] and the ticks counted at the last sample.
+    ang: [f64; 2],
+    ticks: [f64; 2],
+    /// Odometry pose of the axle centre (x, y, φ).
+    odom: [f64; 3],
+    /// Commands waiting for their delay: (time they take effect, v_ref, ω_ref).
+    queue: VecDeque<(f64, f64, f64)>,
+    /// The command in force after the delay.
+    command: [f64; 2],
+    /// The (rate-limited) setpoint the base follows.
+    setpoint: [f64; 2],
+    last: Sample,
+}
+
+impl SimRobot {
+    /// A robot at rest at the origin, heading 0.
+    ///
+    /// # Errors
+    /// [`Error::InvalidSetting`] for a bad θ, profile number, sub-step count or effect.
+    pub fn new(profile: &RobotProfile, settings: &SimSettings) -> Result<Self> {
+        wheelid_models::dynamics::check_theta(&profile.theta)?;
+        settings.effects.validate()?;
+        let positive = [
+            ("period_s", profile.period_s),
+            ("wheel_radius", profile.wheel_radius),
+            ("track", profile.track),
+            ("ticks_per_rev", profile.ticks_per_rev),
+        ];
+        for (name, x) in positive {
+            if !(x.is_finite() && x > 0.0) {
+                return Err(Error::InvalidSetting(format!(
+                    "robot {}: {name} = {x} must be > 0",
+                    profile.name
+                )));
+            }
+        }
+        if settings.substeps == 0 {
+            return Err(Error::InvalidSetting("substeps must be ≥ 1".into()));
+        }
+        let wheel_noise = Normal::new(0.0, profile.wheel_noise_std.max(0.0))
+            .map_err(|e| Error::InvalidSetting(format!("wheel_noise_std: {e}")))?;
+        let mut robot = Self {
+            profile: profile.clone(),
+            effects: settings.effects.clone(),
+            substeps: settings.substeps,
+            encoders: settings.measurement_noise,
+            rng: ChaCha8Rng::seed_from_u64(settings.seed),
+            wheel_noise,
+            k: 0,
+            t: 0.0,
+            s: [0.0; 5],
+            ang: [0.0; 2],
+            ticks: [0.0; 2],
+            odom: [0.0; 3],
+            queue: VecDeque::new(),
+            command: [0.0; 2],
+            setpoint: [0.0; 2],
+            last: Sample {
+                t: 0.0,
+                v: 0.0,
+                w: 0.0,
+                x: 0.0,
+                y: 0.0,
+                phi: 0.0,
+            },
+        };
+        robot.t = robot.jitter(0);
+        robot.last.t = robot.t;
+        Ok(robot)
+    }
+
+    /// Places the robot: the point h at (x, y), heading ψ [rad], velocities v [m/s], ω [rad/s];
+    /// odometry restarts from there. Call before the first [`SimRobot::step`].
+    pub fn set_state(&mut self, state: [f64; 5]) {
+        self.s = state;
+        let [x, y, psi, v, w] = state;
+        let a = self.profile.a;
+        self.odom = [x - a * psi.cos(), y - a * psi.sin(), psi];
+        self.last = Sample {
+            t: self.t,
+            v,
+            w,
+            x,
+            y,
+            phi: psi,
+        };
+    }
+
+    /// The robot's profile.
+    pub fn profile(&self) -> &RobotProfile {
+        &self.profile
+    }
+
+    /// Nominal sample period [s].
+    pub fn period_s(&self) -> f64 {
+        self.profile.period_s
+    }
+
+    /// The true state (x, y, ψ, v, ω) at the current sample instant.
+    pub fn true_state(&self) -> [f64; 5] {
+        self.s
+    }
+
+    /// What the sensors reported at the current sample instant.
+    pub fn sample(&self) -> Sample {
+        self.last
+    }
+
+    /// The θ in force at time `t` (the payload changes it).
+    pub fn theta_at(&self, t: f64) -> [f64; 6] {
+        match self.effects.payload_change {
+            Some(p) if t >= p.time_s => p.theta_after,
+            _ => self.profile.theta,
+        }
+    }
+
+    /// Sample instant k: kΔt plus the jitter (one draw per call when jitter is on).
+    fn jitter(&mut self, k: usize) -> f64 {
+        let dt = self.profile.period_s;
+        let e = match self.effects.sample_jitter {
+            Some(j) if j.std_s > 0.0 => {
+                let z: f64 = rand_distr::StandardNormal.sample(&mut self.rng);
+                (z * j.std_s).clamp(-0.45 * dt, 0.45 * dt)
+            }
+            _ => 0.0,
+        };
+        k as f64 * dt + e
+    }
+
+    /// The setpoint the velocity loop follows at time `tau`, after delay, saturation, rate
+    /// limit (over a sub-step `h`), wheel asymmetry and gain drift.
+    fn setpoint_at(&mut self, tau: f64, h: f64) -> [f64; 2] {
+        while let Some(&(t_on, v, w)) = self.queue.front() {
+            if t_on > tau + 1e-9 * self.profile.period_s {
+                break;
+            }
+            self.command = [v, w];
+            self.queue.pop_front();
+        }
+        let mut target = self.command;
+        if let Some(s) = self.effects.velocity_saturation {
+            target[0] = target[0].clamp(-s.v_max, s.v_max);
+            target[1] = target[1].clamp(-s.w_max, s.w_max);
+        }
+        match self.effects.acceleration_limit {
+            Some(l) => {
+                for (i, a) in [l.v_accel_max, l.w_accel_max].into_iter().enumerate() {
+                    self.setpoint[i] += (target[i] - self.setpoint[i]).clamp(-a * h, a * h);
+                }
+            }
+            None => self.setpoint = target,
+        }
+        let [mut uv, mut uw] = self.setpoint;
+        if let Some(a) = self.effects.wheel_asymmetry {
+            let d = self.profile.track;
+            let (gr, gl) = (2.0 * a.ratio / (1.0 + a.ratio), 2.0 / (1.0 + a.ratio));
+            let (vr, vl) = (gr * (uv + d * uw / 2.0), gl * (uv - d * uw / 2.0));
+            uv = (vr + vl) / 2.0;
+            uw = (vr - vl) / d;
+        }
+        if let Some(g) = self.effects.gain_drift {
+            let gain = 1.0 + g.rate_per_s * tau;
+            uv *= gain;
+            uw *= gain;
+        }
+        [uv, uw]
+    }
+
+    /// Derivative of the state under setpoint `u` and parameters `th`.
+    #[inline]
+    fn f(&self, s: &[f64; 5], u: [f64; 2], th: &[f64; 6]) -> [f64; 5] {
+        let [_, _, psi, v, w] = *s;
+        let (sn, cs) = psi.sin_cos();
+        let a = self.profile.a;
+        let mut fv = u[0] + th[2] * w * w - th[3] * v;
+        let mut fw = u[1] - th[4] * v * w - th[5] * w;
+        if let Some(c) = self.effects.coulomb_friction {
+            fv -= c.v_coulomb * (v / FRICTION_EPS[0]).tanh();
+            fw -= c.w_coulomb * (w / FRICTION_EPS[1]).tanh();
+        }
+        if let Some(sl) = self.effects.slip {
+            fv -= th[3] * sl.k_v * v * w.abs();
+            fw -= th[5] * sl.k_w * v.abs() * w;
+        }
+        [
+            v * cs - a * w * sn,
+            v * sn + a * w * cs,
+            w,
+            fv / th[0],
+            fw / th[1],
+        ]
+    }
+
+    /// Sends the command (v_ref [m/s], ω_ref [rad/s]) at the current sample instant, holds it
+    /// for one period, and returns what the sensors report at the next instant.
+    pub fn step(&mut self, v_ref: f64, w_ref: f64) -> Sample {
+        let t0 = self.t;
+        let t1 = self.jitter(self.k + 1);
+        let delay = self.effects.input_delay.map_or(0.0, |d| d.delay_s);
+        self.queue.push_back((t0 + delay, v_ref, w_ref));
+        let h = (t1 - t0) / self.substeps as f64;
+        let (r, d) = (self.profile.wheel_radius, self.profile.track);
+        for i in 0..self.substeps {
+            let tau = t0 + i as f64 * h;
+            let u = self.setpoint_at(tau, h);
+            let th = self.theta_at(tau);
+            let s = self.s;
+            let k1 = self.f(&s, u, &th);
+            let s2 = std::array::from_fn(|j| s[j] + 0.5 * h * k1[j]);
+            let k2 = self.f(&s2, u, &th);
+            let s3 = std::array::from_fn(|j| s[j] + 0.5 * h * k2[j]);
+            let k3 = self.f(&s3, u, &th);
+            let s4 = std::array::from_fn(|j| s[j] + h * k3[j]);
+            let k4 = self.f(&s4, u, &th);
+            let s1: [f64; 5] = std::array::from_fn(|j| {
+                s[j] + h / 6.0 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j])
+            });
+            if self.encoders {
+                let (v0, w0, v1, w1) = (s[3], s[4], s1[3], s1[4]);
+                self.ang[0] += h * 0.5 * ((v0 + d * w0 / 2.0) + (v1 + d * w1 / 2.0)) / r;
+                self.ang[1] += h * 0.5 * ((v0 - d * w0 / 2.0) + (v1 - d * w1 / 2.0)) / r;
+            }
+            self.s = s1;
+        }
+        self.t = t1;
+        self.k += 1;
+        self.last = self.measure(t1 - t0);
+        self.last
+    }
+
+    /// The sensor reading at the current instant, `dt` after the previous one.
+    fn measure(&mut self, dt: f64) -> Sample {
+        let [x, y, psi, v, w] = self.s;
+        let mut out = Sample {
+            t: self.t,
+            v,
+            w,
+            x,
+            y,
+            phi: psi,
+        };
+        if self.encoders {
+            let p = &self.profile;
+            let (r, d) = (p.wheel_radius, p.track);
+            let rad_per_tick = 2.0 * std::f64::consts::PI / p.ticks_per_rev;
+            let ticks = self.ang.map(|a| (a / rad_per_tick).floor());
+            let dphi = [0, 1].map(|i| (ticks[i] - self.ticks[i]) * rad_per_tick);
+            self.ticks = ticks;
+            let quant = |x: f64| {
+                if p.speed_resolution > 0.0 {
+                    (x / p.speed_resolution).round() * p.speed_resolution
+                } else {
+                    x
+                }
+            };
+            let sr = quant(dphi[0] * r / dt + self.wheel_noise.sample(&mut self.rng));
+            let sl = quant(dphi[1] * r / dt + self.wheel_noise.sample(&mut self.rng));
+            out.v = (sr + sl) / 2.0;
+            out.w = (sr - sl) / d;
+            // Odometry, eq. 3.2–3.3.
+            let ds = r * (dphi[0] + dphi[1]) / 2.0;
+            let dth = r * (dphi[0] - dphi[1]) / d;
+            let mid = self.odom[2] + dth / 2.0;
+            self.odom[0] += ds * mid.cos();
+            self.odom[1] += ds * mid.sin();
+            self.odom[2] += dth;
+            let [ox, oy, oth] = self.odom;
+            out.x = ox + p.a * oth.cos();
+            out.y = oy + p.a * oth.sin();
+            out.phi = oth;
+        }
+        if let Some(n) = self.effects.measurement_noise {
+            let z: [f64; 2] = [0, 1].map(|_| rand_distr::StandardNormal.sample(&mut self.rng));
+            out.v += n.v_std * z[0];
+            out.w += n.w_std * z[1];
+        }
+        out
+    }
+}
+
+/// Simulates `profile` under `excitation` from rest at the origin and returns the recording
+/// (t, v_ref, ω_ref, v, ω, x, y, φ at each sample instant; the command at t_k is held until
+/// t_{k+1}). The metadata name the robot, seed, true θ and active effects, with
+/// `command_hold: zoh` and `velocity_sampling: window_average` (encoders) or `instant`.
 ///
 /// # Errors
-/// If the resulting recording is invalid (e.g. a non-finite state from an unstable θ).
+/// As [`SimRobot::new`], or if the recording is invalid (e.g. a non-finite state from an
+/// unstable θ).
 pub fn simulate_recording(
     profile: &RobotProfile,
     excitation: &Excitation,
     s: &SimSettings,
 ) -> Result<Recording> {
-    let dt = profile.period_s;
-    let n = (s.duration_s / dt).floor() as usize + 1;
-    let h = dt / s.substeps as f64;
-    let th = profile.theta;
-    let (r, d) = (profile.wheel_radius, profile.track);
-    let mut rng = ChaCha8Rng::seed_from_u64(s.seed);
-    let noise = Normal::new(0.0, profile.wheel_noise_std.max(0.0))
-        .map_err(|e| wheelid_core::Error::InvalidSetting(format!("noise: {e}")))?;
-    let quant = |x: f64| {
-        if profile.speed_resolution > 0.0 {
-            (x / profile.speed_resolution).round() * profile.speed_resolution
-        } else {
-            x
-        }
-    };
-    let rad_per_tick = 2.0 * std::f64::consts::PI / profile.ticks_per_rev;
-    let (mut v, mut w) = (0.0f64, 0.0f64);
-    let (mut ang_r, mut ang_l) = (0.0f64, 0.0f64);
-    let (mut ticks_r, mut ticks_l) = (0.0f64, 0.0f64);
-    let (mut x, mut y, mut phi) = (0.0f64, 0.0f64, 0.0f64);
-    let mut cols: [Vec<f64>; 8] = Default::default();
+    if !(s.duration_s.is_finite() && s.duration_s > 0.0) {
+        return Err(Error::InvalidSetting(format!(
+            "duration_s = {} must be > 0",
+            s.duration_s
+        )));
+    }
+    let mut robot = SimRobot::new(profile, s)?;
+    let n = (s.duration_s / profile.period_s).floor() as usize + 1;
+    let mut cols: [Vec<f64>; 8] = std::array::from_fn(|_| Vec::with_capacity(n));
+    let mut m = robot.sample();
     for k in 0..n {
-        let t = k as f64 * dt;
-        let (vr, wr) = excitation.at(t);
-        let (vm, wm) = if k == 0 {
-            (0.0, 0.0)
-        } else if s.measurement_noise {
-            let tr = (ang_r / rad_per_tick).floor();
-            let tl = (ang_l / rad_per_tick).floor();
-            let sr = quant((tr - ticks_r) * rad_per_tick * r / dt + noise.sample(&mut rng));
-            let sl = quant((tl - ticks_l) * rad_per_tick * r / dt + noise.sample(&mut rng));
-            ticks_r = tr;
-            ticks_l = tl;
-            ((sr + sl) / 2.0, (sr - sl) / d)
-        } else {
-            (v, w)
-        };
-        // Odometry (eq. 3.2–3.3): heading at the middle of the step.
-        if k > 0 {
-            x += vm * dt * (phi + wm * dt / 2.0).cos();
-            y += vm * dt * (phi + wm * dt / 2.0).sin();
-            phi += wm * dt;
-        }
-        for (c, val) in cols.iter_mut().zip([t, vr, wr, vm, wm, x, y, phi]) {
+        let (vr, wr) = excitation.at(m.t);
+        for (c, val) in cols
+            .iter_mut()
+            .zip([m.t, vr, wr, m.v, m.w, m.x, m.y, m.phi])
+        {
             c.push(val);
         }
-        // Advance the true state over [t, t + Δt) with the held command.
-        for _ in 0..s.substeps {
-            let f = |v: f64, w: f64| wheelid_models::dynamics::accel(&th, v, w, vr, wr);
-            let k1 = f(v, w);
-            let k2 = f(v + 0.5 * h * k1.0, w + 0.5 * h * k1.1);
-            let k3 = f(v + 0.5 * h * k2.0, w + 0.5 * h * k2.1);
-            let k4 = f(v + h * k3.0, w + h * k3.1);
-            let (dv, dw) = (
-                h / 6.0 * (k1.0 + 2.0 * k2.0 + 2.0 * k3.0 + k4.0),
-                h / 6.0 * (k1.1 + 2.0 * k2.1 + 2.0 * k3.1 + k4.1),
-            );
-            // Wheel angles: trapezoid of the wheel speeds (v ± dω/2)/r over the sub-step.
-            let (v1, w1) = (v + dv, w + dw);
-            ang_r += h * 0.5 * ((v + d * w / 2.0) + (v1 + d * w1 / 2.0)) / r;
-            ang_l += h * 0.5 * ((v - d * w / 2.0) + (v1 - d * w1 / 2.0)) / r;
-            v = v1;
-            w = w1;
+        if k + 1 < n {
+            m = robot.step(vr, wr);
         }
     }
     let [t, vr, wr, vm, wm, x, y, phi] = cols;
@@ -123,6 +418,15 @@ pub fn simulate_recording(
     rec.set_meta("robot", profile.name.clone());
     rec.set_meta("source", format!("wheelid simulator, seed {}", s.seed));
     rec.set_meta("theta_true", format!("{:?}", profile.theta));
+    let active = s.effects.active();
+    rec.set_meta(
+        "effects",
+        if active.is_empty() {
+            "none".to_string()
+        } else {
+            format!("{:?}", s.effects)
+        },
+    );
     rec.set_meta("command_hold", "zoh");
     rec.set_meta(
         "velocity_sampling",
