@@ -3,16 +3,21 @@
 //! Robot backends and what drives them: [`profile`] (the Pioneer 3-DX and Khepera III of
 //! Laut 2011), [`excitation`] (sums of sines, steps, chirps and multisines), [`trajectory`]
 //! (the figure eights of Appendix A), [`simulator`] (the simulated robot of eq. 2.19, with an
-//! encoder measurement model) and [`effects`] (the physics the 6-θ model leaves out).
+//! encoder measurement model) [`effects`] (the physics the 6-θ model leaves out), [`control`] (the kinematic,
+//! inverse-dynamics and adaptive controllers of chapters 3–4) and [`tracking`] (the closed loop).
 
+pub mod control;
 pub mod effects;
 pub mod excitation;
 pub mod profile;
 pub mod simulator;
+pub mod tracking;
 pub mod trajectory;
 
+pub use control::{AdaptiveController, AdaptiveSettings, KinematicLaw};
 pub use effects::Effects;
 pub use excitation::{Excitation, Multisine, MultisineSpec, Phases, Signal, SumOfSines};
 pub use profile::RobotProfile;
 pub use simulator::{Sample, SimRobot, SimSettings, simulate_recording};
+pub use tracking::{Start, TrackResult, TrackSettings, track};
 pub use trajectory::{DesiredState, FigureEight, FigureEightDither, Trajectory, TrajectorySpec};
