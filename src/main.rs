@@ -4,9 +4,12 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
+use wheelid::config::{ExcitationConfig, SimulateConfig, TrackConfig, read_toml, robot_profile};
 use wheelid::files::{ModelFile, read_bounds};
 use wheelid::identify::{IdentifySettings, identify};
-use wheelid::robots::{Excitation, RobotProfile, SimSettings, simulate_recording};
+use wheelid::robots::{
+    Excitation, RobotProfile, SimSettings, TrajectorySpec, simulate_recording, track,
+};
 use wheelid::{core::Recording, models, report, solvers};
 
 #[derive(Parser)]
@@ -25,6 +28,211 @@ enum Command {
     /// Identify θ1…θ6 from recordings (CSV, see RECORDING_FORMAT.md). With no file, identifies a
     /// recording of the built-in simulated Pioneer 3-DX and prints the true values beside.
     Identify(IdentifyArgs),
+    /// Simulate a robot (eq. 2.19 with encoders and optional effects) under an excitation and
+    /// write the recording as CSV.
+    Simulate(SimulateArgs),
+    /// Figure-eight tracking with the inverse-dynamics controller and adaptive law (thesis
+    /// ch. 3–4) on a simulated robot; reports the distance error.
+    Track(TrackArgs),
+}
+
+#[derive(clap::Args)]
+struct SimulateArgs {
+    /// TOML configuration (robot, [excitation], [simulation] with [simulation.effects.*]);
+    /// the flags below override it.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Built-in robot.
+    #[arg(long, value_parser = RobotProfile::NAMES)]
+    robot: Option<String>,
+    /// Excitation preset: thesis (the thesis's signal for the robot), regression (§4.2), or
+    /// multisine (random-phase multisines up to 2 Hz, seeded by --seed).
+    #[arg(long, value_parser = ["thesis", "regression", "multisine"])]
+    excitation: Option<String>,
+    /// Duration [s].
+    #[arg(long)]
+    duration: Option<f64>,
+    /// Random seed (noise, jitter, multisine phases).
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Report the exact v, ω and pose instead of the encoder model.
+    #[arg(long)]
+    exact: bool,
+    /// Output CSV file.
+    #[arg(long, short)]
+    out: PathBuf,
+}
+
+#[derive(clap::Args)]
+struct TrackArgs {
+    /// TOML configuration (robot, model, [track] with [track.adaptation] and
+    /// [track.simulation.effects.*]); the flags below override it.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Built-in robot.
+    #[arg(long, value_parser = RobotProfile::NAMES)]
+    robot: Option<String>,
+    /// Identified model file (from `wheelid identify --out`) whose θ seeds θ̂(0).
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// Initial θ̂(0) as six comma-separated values.
+    #[arg(long, value_delimiter = ',', num_args = 6)]
+    theta_hat: Option<Vec<f64>>,
+    /// Adaptation gains γ1…γ6, comma-separated (one value: the same for all).
+    #[arg(long, value_delimiter = ',')]
+    gamma: Option<Vec<f64>>,
+    /// Adaptation start time [s].
+    #[arg(long)]
+    adapt_from: Option<f64>,
+    /// Parameters held fixed during adaptation, 1-based, comma-separated (e.g. 4,6).
+    #[arg(long, value_delimiter = ',')]
+    freeze: Option<Vec<usize>>,
+    /// Use the figure eight with the dither (A.2).
+    #[arg(long)]
+    dither: bool,
+    /// Duration [s].
+    #[arg(long)]
+    duration: Option<f64>,
+    /// Random seed of the robot's noise.
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Exact measurements instead of encoders and odometry.
+    #[arg(long)]
+    exact: bool,
+    /// Write trajectory.png, error.png and theta.png into this directory.
+    #[arg(long)]
+    plot: Option<PathBuf>,
+    /// Print the report as JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+fn run_simulate(a: SimulateArgs) -> Result<()> {
+    let cfg: SimulateConfig = match &a.config {
+        Some(p) => read_toml(p)?,
+        None => SimulateConfig::default(),
+    };
+    let robot = robot_profile(
+        a.robot.as_deref().or(cfg.robot.as_deref()),
+        if a.robot.is_some() {
+            None
+        } else {
+            cfg.profile.as_ref()
+        },
+    )?;
+    let mut sim = cfg.simulation.clone();
+    if let Some(d) = a.duration {
+        sim.duration_s = d;
+    }
+    if let Some(s) = a.seed {
+        sim.seed = s;
+    }
+    if a.exact {
+        sim.measurement_noise = false;
+    }
+    let excitation = match a.excitation.as_deref() {
+        Some("thesis") => ExcitationConfig::for_robot(&robot),
+        Some("regression") => ExcitationConfig::ThesisRegression,
+        Some(_) => ExcitationConfig::RandomMultisine {
+            seed: sim.seed,
+            v_offset: 0.25 * robot.v_max,
+            v_amp: 0.25 * robot.v_max,
+            w_amp: 0.25 * robot.w_max,
+            f_max_hz: 2.0,
+        },
+        None => cfg
+            .excitation
+            .clone()
+            .unwrap_or_else(|| ExcitationConfig::for_robot(&robot)),
+    };
+    let rec = simulate_recording(&robot, &excitation.build()?, &sim)?;
+    rec.write_csv(&a.out)?;
+    println!(
+        "{} samples ({:.1} s of {} at {} s) written to {}",
+        rec.len(),
+        sim.duration_s,
+        robot.name,
+        robot.period_s,
+        a.out.display()
+    );
+    let effects = sim.effects.active();
+    if !effects.is_empty() {
+        println!("effects: {}", effects.join(", "));
+    }
+    Ok(())
+}
+
+fn run_track(a: TrackArgs) -> Result<()> {
+    let (cfg, base): (TrackConfig, PathBuf) = match &a.config {
+        Some(p) => (
+            read_toml(p)?,
+            p.parent().map(PathBuf::from).unwrap_or_default(),
+        ),
+        None => (TrackConfig::default(), PathBuf::new()),
+    };
+    let robot = robot_profile(
+        a.robot.as_deref().or(cfg.robot.as_deref()),
+        if a.robot.is_some() {
+            None
+        } else {
+            cfg.profile.as_ref()
+        },
+    )?;
+    let mut s = cfg.track.clone();
+    let model = a
+        .model
+        .clone()
+        .or_else(|| cfg.model.as_ref().map(|m| base.join(m)));
+    if let Some(m) = &model {
+        let file = ModelFile::read(m)?;
+        s.theta_hat0.copy_from_slice(&file.theta);
+    }
+    if let Some(th) = &a.theta_hat {
+        s.theta_hat0.copy_from_slice(th);
+    }
+    if let Some(g) = &a.gamma {
+        s.adaptation.gamma = match g.len() {
+            1 => [g[0]; 6],
+            6 => [g[0], g[1], g[2], g[3], g[4], g[5]],
+            n => bail!("--gamma takes 1 or 6 values, got {n}"),
+        };
+    }
+    if let Some(t) = a.adapt_from {
+        s.adaptation.start_s = t;
+    }
+    if let Some(f) = &a.freeze {
+        s.adaptation.frozen = f.clone();
+    }
+    if a.dither {
+        s.trajectory = Some(TrajectorySpec::for_profile(&robot, true));
+    }
+    if let Some(d) = a.duration {
+        s.duration_s = d;
+    }
+    if let Some(seed) = a.seed {
+        s.simulation.seed = seed;
+    }
+    if a.exact {
+        s.simulation.measurement_noise = false;
+    }
+    let r = track(&robot, &s)?;
+    if a.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&report::track_json(&robot, &s, &r))?
+        );
+    } else {
+        print!("{}", report::track_text(&robot, &s, &r));
+    }
+    if let Some(dir) = &a.plot {
+        let files = wheelid::plot::write_track_plots(&r, dir)?;
+        if !a.json {
+            for f in files {
+                println!("plot: {}", f.display());
+            }
+        }
+    }
+    Ok(())
 }
 
 #[derive(clap::Args)]
@@ -124,5 +332,7 @@ fn run_identify(a: IdentifyArgs) -> Result<()> {
 fn main() -> Result<()> {
     match Cli::parse().command {
         Command::Identify(a) => run_identify(a),
+        Command::Simulate(a) => run_simulate(a),
+        Command::Track(a) => run_track(a),
     }
 }

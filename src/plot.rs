@@ -11,6 +11,7 @@ use plotters::prelude::*;
 use plotters::style::FontStyle;
 
 use crate::identify::Identification;
+use wheelid_robots::TrackResult;
 
 const MAX_POINTS: usize = 4000;
 
@@ -171,6 +172,121 @@ pub fn write_plots(id: &Identification, dir: &Path) -> Result<Vec<PathBuf>> {
                     RED.stroke_width(2),
                 ))?;
             }
+        }
+        root.present()?;
+    }
+    out.push(path);
+    Ok(out)
+}
+
+/// Writes the plots of a tracking run into `dir` (created if needed), in the style of the
+/// thesis's Figs 4.12–4.30, and returns the files written:
+/// * `trajectory.png`: desired vs actual path (x, y);
+/// * `error.png`: distance error against time;
+/// * `theta.png`: θ̂1…θ̂6 against time, one panel each.
+///
+/// # Errors
+/// If the directory cannot be created or a PNG cannot be written.
+pub fn write_track_plots(r: &TrackResult, dir: &Path) -> Result<Vec<PathBuf>> {
+    register_font();
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let step = (r.t.len() / MAX_POINTS).max(1);
+    let (t0, t1) = (r.t[0], r.t[r.t.len() - 1]);
+    let mut out = Vec::new();
+
+    let path = dir.join("trajectory.png");
+    {
+        let root = BitMapBackend::new(&path, (900, 900)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let xs = r.desired.iter().chain(&r.actual).map(|p| p[0]);
+        let ys = r.desired.iter().chain(&r.actual).map(|p| p[1]);
+        let ((x0, x1), (y0, y1)) = (range(xs), range(ys));
+        let mut chart = ChartBuilder::on(&root)
+            .caption(
+                format!("{}: desired vs actual trajectory", r.robot),
+                ("sans-serif", 20),
+            )
+            .margin(10)
+            .x_label_area_size(35)
+            .y_label_area_size(60)
+            .build_cartesian_2d(x0..x1, y0..y1)?;
+        chart
+            .configure_mesh()
+            .x_desc("x [m]")
+            .y_desc("y [m]")
+            .draw()?;
+        for (pts, color, label) in [(&r.desired, BLUE, "desired"), (&r.actual, RED, "actual")] {
+            chart
+                .draw_series(LineSeries::new(
+                    pts.iter().step_by(step).map(|p| (p[0], p[1])),
+                    color.stroke_width(if label == "actual" { 1 } else { 2 }),
+                ))?
+                .label(label)
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color));
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()?;
+        root.present()?;
+    }
+    out.push(path);
+
+    let path = dir.join("error.png");
+    {
+        let root = BitMapBackend::new(&path, (1200, 500)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let (_, e1) = range(r.error.iter().copied());
+        let mut chart = ChartBuilder::on(&root)
+            .caption(
+                format!(
+                    "{}: distance error (RMS {:.4} m, final {:.4} m, max {:.4} m)",
+                    r.robot, r.summary.rms, r.summary.last, r.summary.max
+                ),
+                ("sans-serif", 18),
+            )
+            .margin(10)
+            .x_label_area_size(35)
+            .y_label_area_size(60)
+            .build_cartesian_2d(t0..t1, 0.0..e1)?;
+        chart
+            .configure_mesh()
+            .x_desc("t [s]")
+            .y_desc("error [m]")
+            .draw()?;
+        chart.draw_series(LineSeries::new(
+            r.t.iter()
+                .zip(&r.error)
+                .step_by(step)
+                .map(|(a, b)| (*a, *b)),
+            RED.stroke_width(1),
+        ))?;
+        root.present()?;
+    }
+    out.push(path);
+
+    let path = dir.join("theta.png");
+    {
+        let root = BitMapBackend::new(&path, (1500, 800)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let cells = root.split_evenly((2, 3));
+        for (i, area) in cells.iter().enumerate() {
+            let (y0, y1) = range(r.theta_hat.iter().map(|th| th[i]));
+            let mut chart = ChartBuilder::on(area)
+                .caption(format!("θ̂{}", i + 1), ("sans-serif", 18))
+                .margin(8)
+                .x_label_area_size(30)
+                .y_label_area_size(60)
+                .build_cartesian_2d(t0..t1, y0..y1)?;
+            chart.configure_mesh().x_desc("t [s]").draw()?;
+            chart.draw_series(LineSeries::new(
+                r.t.iter()
+                    .zip(&r.theta_hat)
+                    .step_by(step)
+                    .map(|(a, th)| (*a, th[i])),
+                BLUE.stroke_width(2),
+            ))?;
         }
         root.present()?;
     }

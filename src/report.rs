@@ -6,6 +6,7 @@
 use serde_json::{Value, json};
 
 use crate::identify::Identification;
+use wheelid_robots::{RobotProfile, TrackResult, TrackSettings};
 
 /// JSON report. `truth` (e.g. the embedded robot's θ) is included when given.
 pub fn to_json(id: &Identification, truth: Option<&[f64]>) -> Value {
@@ -138,4 +139,57 @@ pub fn to_text(id: &Identification, truth: Option<&[f64]>) -> String {
         ss("θ6", id.steady_theta6)
     );
     s
+}
+
+/// JSON report of a tracking run:
+/// `{"robot", "theta_true": [6], "theta_hat0": [6], "theta_hat_final": [6],
+///   "error_m": {"rms", "final", "max"}, "duration_s", "steps", "adaptation": {…}}`.
+pub fn track_json(robot: &RobotProfile, s: &TrackSettings, r: &TrackResult) -> Value {
+    json!({
+        "robot": robot.name,
+        "theta_true": robot.theta,
+        "theta_hat0": s.theta_hat0,
+        "theta_hat_final": r.final_theta_hat(),
+        "error_m": {"rms": r.summary.rms, "final": r.summary.last, "max": r.summary.max},
+        "duration_s": s.duration_s,
+        "steps": r.t.len(),
+        "adaptation": s.adaptation,
+        "effects": s.simulation.effects.active(),
+    })
+}
+
+/// Text report of a tracking run.
+pub fn track_text(robot: &RobotProfile, s: &TrackSettings, r: &TrackResult) -> String {
+    use std::fmt::Write;
+    let mut o = String::new();
+    let g = s.adaptation.effective_gamma();
+    let adapting = g.iter().any(|&x| x > 0.0);
+    let _ = writeln!(
+        o,
+        "robot {}  {:.1} s  {} steps of {} s  adaptation {}",
+        robot.name,
+        s.duration_s,
+        r.t.len(),
+        s.control_period_s.unwrap_or(robot.period_s),
+        if adapting {
+            format!("from t = {} s, γ = {g:?}", s.adaptation.start_s)
+        } else {
+            "off".to_string()
+        }
+    );
+    let effects = s.simulation.effects.active();
+    if !effects.is_empty() {
+        let _ = writeln!(o, "effects: {}", effects.join(", "));
+    }
+    let _ = writeln!(o, "\nparam      θ̂(0)     θ̂(end)       true");
+    let th_end = r.final_theta_hat();
+    for (i, ((t0, t1), tt)) in s.theta_hat0.iter().zip(th_end).zip(robot.theta).enumerate() {
+        let _ = writeln!(o, "theta{}  {t0:>9.4}  {t1:>9.4}  {tt:>9.4}", i + 1);
+    }
+    let _ = writeln!(
+        o,
+        "\ndistance error [m]: RMS {:.4}  final {:.4}  max {:.4}",
+        r.summary.rms, r.summary.last, r.summary.max
+    );
+    o
 }

@@ -13,7 +13,7 @@ use wheelid_core::{Error, Result};
 use crate::control::{AdaptiveController, AdaptiveSettings, KinematicLaw};
 use crate::profile::RobotProfile;
 use crate::simulator::{SimRobot, SimSettings};
-use crate::trajectory::{FigureEight, Trajectory, TrajectorySpec};
+use crate::trajectory::{Trajectory, TrajectorySpec};
 
 /// Where the robot starts.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -33,8 +33,9 @@ pub enum Start {
 pub struct TrackSettings {
     /// Duration [s].
     pub duration_s: f64,
-    /// The desired trajectory.
-    pub trajectory: TrajectorySpec,
+    /// The desired trajectory; `None`: the figure-eight preset for the robot
+    /// ([`TrajectorySpec::for_profile`]).
+    pub trajectory: Option<TrajectorySpec>,
     /// Kinematic-law gains (eq. 4.8).
     pub kinematic: KinematicLaw,
     /// Initial estimate θ̂(0).
@@ -45,23 +46,28 @@ pub struct TrackSettings {
     pub start: Start,
     /// Control period [s]; `None`: the robot's period.
     pub control_period_s: Option<f64>,
+    /// Clip the commands to the profile's ±v_max, ±w_max before sending them (as a robot's
+    /// firmware does; without it a diverging adaptation ends the run with an error).
+    pub clip_commands: bool,
     /// The simulated robot's settings (seed, sub-steps, encoder model, effects);
     /// `duration_s` there is ignored.
-    pub robot: SimSettings,
+    pub simulation: SimSettings,
 }
 
 impl Default for TrackSettings {
-    /// 120 s of the Pioneer figure eight, θ̂ = 1, no adaptation, from rest, robot period.
+    /// 120 s of the robot's figure eight, θ̂ = 1, no adaptation, from rest, robot period,
+    /// commands clipped to the robot's limits.
     fn default() -> Self {
         Self {
             duration_s: 120.0,
-            trajectory: TrajectorySpec::from(FigureEight::pioneer()),
+            trajectory: None,
             kinematic: KinematicLaw::default(),
             theta_hat0: [1.0; 6],
             adaptation: AdaptiveSettings::default(),
             start: Start::AtRest,
             control_period_s: None,
-            robot: SimSettings::default(),
+            clip_commands: true,
+            simulation: SimSettings::default(),
         }
     }
 }
@@ -152,9 +158,11 @@ pub fn track(profile: &RobotProfile, settings: &TrackSettings) -> Result<TrackRe
         }
         profile.period_s = dt;
     }
-    settings.trajectory.validate()?;
-    let trajectory = &settings.trajectory;
-    let mut robot = SimRobot::new(&profile, &settings.robot)?;
+    let trajectory = settings
+        .trajectory
+        .unwrap_or_else(|| TrajectorySpec::for_profile(&profile, false));
+    trajectory.validate()?;
+    let mut robot = SimRobot::new(&profile, &settings.simulation)?;
     let mut ctrl = AdaptiveController::new(settings.adaptation.clone(), settings.theta_hat0)?;
     let d0 = trajectory.at(0.0);
     let (v0, w0) = match settings.start {
@@ -181,7 +189,13 @@ pub fn track(profile: &RobotProfile, settings: &TrackSettings) -> Result<TrackRe
         let kin = settings.kinematic.command(&d, m.x, m.y, m.phi);
         let dt = if k == 0 { 0.0 } else { m.t - t_prev };
         let th = ctrl.theta_hat();
-        let u = ctrl.step(m.t, dt, kin, m.v, m.w);
+        let mut u = ctrl.step(m.t, dt, kin, m.v, m.w);
+        if settings.clip_commands {
+            u = [
+                u[0].clamp(-profile.v_max, profile.v_max),
+                u[1].clamp(-profile.w_max, profile.w_max),
+            ];
+        }
         let s = robot.true_state();
         if !s.iter().chain(&u).all(|x| x.is_finite()) {
             return Err(Error::InvalidSetting(format!(

@@ -373,6 +373,18 @@ pub enum TrajectorySpec {
 }
 
 impl TrajectorySpec {
+    /// The figure eight (with the dither or not) preset for a robot: the Khepera III's for a
+    /// profile whose name starts with `khepera`, the Pioneer 3-DX's otherwise.
+    pub fn for_profile(profile: &crate::profile::RobotProfile, dither: bool) -> Self {
+        let khepera = profile.name.starts_with("khepera");
+        match (khepera, dither) {
+            (true, false) => FigureEight::khepera().into(),
+            (true, true) => FigureEightDither::khepera().into(),
+            (false, false) => FigureEight::pioneer().into(),
+            (false, true) => FigureEightDither::pioneer().into(),
+        }
+    }
+
     /// Validates the parameters ([`FigureEight::validate`], [`FigureEightDither::validate`]).
     ///
     /// # Errors

@@ -1,0 +1,158 @@
+//! TOML configurations of `wheelid simulate` and `wheelid track`.
+//!
+//! Both name a robot (`robot = "khepera3"`, one of
+//! [`RobotProfile::NAMES`](wheelid_robots::RobotProfile::NAMES)) or give a whole `[profile]`
+//! table, and a `[simulation]` table ([`SimSettings`]: `duration_s`, `seed`, `substeps`,
+//! `measurement_noise` and `[simulation.effects.*]`). A simulation adds an `[excitation]`; a
+//! tracking run a `[track]` table ([`TrackSettings`]) and optionally `model = "FILE"`, an
+//! identified model whose θ seeds θ̂(0). Unknown keys are errors naming the line and column.
+//!
+//! ```toml
+//! robot = "khepera3"
+//! model = "khepera.toml"          # θ̂(0) from `wheelid identify --out khepera.toml`
+//!
+//! [track]
+//! duration_s = 120.0
+//! trajectory = { type = "figure_eight", ax = 0.25, ay = 0.5, f = 0.2 }
+//!
+//! [track.adaptation]
+//! gamma = [1.0, 1.0, 1.0, 0.0, 1.0, 0.0]
+//! start_s = 3.0
+//!
+//! [track.simulation.effects.payload_change]
+//! time_s = 60.0
+//! theta_after = [0.0456, 0.1136, -0.0002, 1.003, 0.1464, 0.9981]
+//! ```
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use serde::{Deserialize, Serialize};
+use wheelid_robots::{Excitation, RobotProfile, SimSettings, TrackSettings};
+
+use crate::files::toml_msg;
+
+/// The excitation of a simulation, by `type`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "type", rename_all = "snake_case", deny_unknown_fields)]
+pub enum ExcitationConfig {
+    /// The thesis's Pioneer excitation (§4.4.2).
+    ThesisPioneer,
+    /// The thesis's Khepera excitation (§4.4.1).
+    ThesisKhepera,
+    /// The thesis's simulated regression excitation (§4.2).
+    ThesisRegression,
+    /// Random-phase multisines on interleaved lines
+    /// ([`Excitation::random_multisine`]).
+    RandomMultisine {
+        /// Phase seed.
+        seed: u64,
+        /// v_ref offset [m/s].
+        v_offset: f64,
+        /// v_ref peak deviation [m/s].
+        v_amp: f64,
+        /// ω_ref peak [rad/s].
+        w_amp: f64,
+        /// Highest line [Hz].
+        f_max_hz: f64,
+    },
+    /// Any pair of signals ([`wheelid_robots::Signal`]).
+    Signals(Box<Excitation>),
+}
+
+impl ExcitationConfig {
+    /// The preset for a robot: the thesis's Khepera excitation for a Khepera, the Pioneer's
+    /// otherwise.
+    pub fn for_robot(profile: &RobotProfile) -> Self {
+        if profile.name.starts_with("khepera") {
+            Self::ThesisKhepera
+        } else {
+            Self::ThesisPioneer
+        }
+    }
+
+    /// The excitation.
+    ///
+    /// # Errors
+    /// Invalid multisine settings or signals.
+    pub fn build(&self) -> Result<Excitation> {
+        let e = match self {
+            Self::ThesisPioneer => Excitation::thesis_pioneer(),
+            Self::ThesisKhepera => Excitation::thesis_khepera(),
+            Self::ThesisRegression => Excitation::thesis_regression(),
+            Self::RandomMultisine {
+                seed,
+                v_offset,
+                v_amp,
+                w_amp,
+                f_max_hz,
+            } => Excitation::random_multisine(*seed, *v_offset, *v_amp, *w_amp, *f_max_hz)?,
+            Self::Signals(e) => {
+                e.v_ref.validate()?;
+                e.w_ref.validate()?;
+                (**e).clone()
+            }
+        };
+        Ok(e)
+    }
+}
+
+/// `wheelid simulate --config FILE`.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SimulateConfig {
+    /// Built-in robot name (default `pioneer3dx`).
+    pub robot: Option<String>,
+    /// A whole robot profile instead of a built-in one.
+    pub profile: Option<RobotProfile>,
+    /// Excitation (default: the thesis's preset for the robot).
+    pub excitation: Option<ExcitationConfig>,
+    /// Duration, seed, sub-steps, encoder model, effects.
+    #[serde(default)]
+    pub simulation: SimSettings,
+}
+
+/// `wheelid track --config FILE`.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TrackConfig {
+    /// Built-in robot name (default `pioneer3dx`).
+    pub robot: Option<String>,
+    /// A whole robot profile instead of a built-in one.
+    pub profile: Option<RobotProfile>,
+    /// An identified model file whose θ is θ̂(0) (overrides `track.theta_hat0`); relative to
+    /// the configuration file.
+    pub model: Option<PathBuf>,
+    /// The tracking run. Without a `trajectory`, the figure eight preset for the robot.
+    #[serde(default)]
+    pub track: TrackSettings,
+}
+
+/// Reads and parses a TOML file into `T`, with errors naming the file, line and column.
+///
+/// # Errors
+/// I/O and TOML errors.
+pub fn read_toml<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    toml::from_str(&text)
+        .map_err(|e| anyhow::anyhow!("{}: {}", path.display(), toml_msg(&text, &e)))
+}
+
+/// The robot: a whole `profile` if given, else the built-in `name` (default `pioneer3dx`).
+///
+/// # Errors
+/// An unknown name, listing the known ones.
+pub fn robot_profile(name: Option<&str>, profile: Option<&RobotProfile>) -> Result<RobotProfile> {
+    if let Some(p) = profile {
+        return Ok(p.clone());
+    }
+    let name = name.unwrap_or("pioneer3dx");
+    match RobotProfile::by_name(name) {
+        Some(p) => Ok(p),
+        None => bail!(
+            "unknown robot {name:?}; known robots: {}",
+            RobotProfile::NAMES.join(", ")
+        ),
+    }
+}
