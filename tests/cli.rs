@@ -183,3 +183,139 @@ fn bounds_file_errors_name_the_line_and_physical_bounds_work() {
     // The physical intervals bound θ1 well below the simulated Pioneer's 0.26 s: it sits on its bound.
     assert_eq!(v["bound_state"][0], "at_upper");
 }
+
+/// `wheelid simulate` from a TOML config with an effect, then `wheelid identify` on the file,
+/// then `wheelid track` seeded by the identified model, from a config and flags.
+#[test]
+fn simulate_identify_track_from_config_and_flags() {
+    let dir = tempfile::tempdir().expect("tmp");
+    let p = |name: &str| dir.path().join(name).to_str().expect("utf8").to_owned();
+    std::fs::write(
+        p("sim.toml"),
+        "robot = \"khepera3\"\n\n[excitation]\ntype = \"thesis_khepera\"\n\n\
+         [simulation]\nduration_s = 60.0\nseed = 3\n\n\
+         [simulation.effects.input_delay]\ndelay_s = 0.1\n",
+    )
+    .expect("writes config");
+    let o = wheelid(&["simulate", "--config", &p("sim.toml"), "--out", &p("k.csv")]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("effects: input_delay"));
+    let rec = wheelid::core::Recording::read_csv(p("k.csv")).expect("a valid recording");
+    assert_eq!(rec.len(), 3001, "60 s at 50 Hz");
+    assert_eq!(rec.meta("robot"), Some("khepera3"));
+    assert!(
+        rec.meta("effects")
+            .is_some_and(|e| e.contains("delay_s: 0.1"))
+    );
+    // The delay holds the robot still for its first 0.1 s (5 samples) of a moving command.
+    assert!(
+        rec.v[..5].iter().all(|&v| v.abs() < 1e-3),
+        "{:?}",
+        &rec.v[..8]
+    );
+    assert!(rec.v[8] > 0.005);
+
+    // A clean recording identifies the Khepera; its model seeds the tracking run.
+    let o = wheelid(&[
+        "simulate",
+        "--robot",
+        "khepera3",
+        "--duration",
+        "90",
+        "--out",
+        &p("clean.csv"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = wheelid(&["identify", &p("clean.csv"), "--out", &p("khepera.toml")]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    std::fs::write(
+        p("track.toml"),
+        "robot = \"khepera3\"\nmodel = \"khepera.toml\"\n\n[track]\nduration_s = 60.0\n\n\
+         [track.adaptation]\ngamma = [1.0, 1.0, 1.0, 1.0, 1.0, 1.0]\nstart_s = 3.0\nfrozen = [4, 6]\n",
+    )
+    .expect("writes config");
+    let o = wheelid(&[
+        "track",
+        "--config",
+        &p("track.toml"),
+        "--json",
+        "--plot",
+        &p("plots"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("stdout is JSON only");
+    assert_eq!(v["robot"], "khepera3");
+    let th0 = v["theta_hat0"].as_array().expect("theta_hat0");
+    let t1 = th0[0].as_f64().expect("θ̂1");
+    assert!(
+        (t1 - 0.0228).abs() < 0.03 * 0.0228,
+        "θ̂(0) from the model file: {t1}"
+    );
+    let th_end = v["theta_hat_final"].as_array().expect("final");
+    assert_eq!(th_end[3], th0[3], "θ̂4 frozen");
+    assert_ne!(th_end[0], th0[0], "θ̂1 adapted");
+    let rms = v["error_m"]["rms"].as_f64().expect("rms");
+    assert!(rms > 0.0 && rms < 0.01, "identified θ̂ tracks well: {rms}");
+    for f in ["trajectory.png", "error.png", "theta.png"] {
+        let meta = std::fs::metadata(dir.path().join("plots").join(f)).expect(f);
+        assert!(meta.len() > 10_000, "{f} has content");
+    }
+
+    // Flags alone: θ̂ = 1 without adaptation tracks far worse.
+    let o = wheelid(&["track", "--robot", "khepera3", "--duration", "60", "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON");
+    let rms_ones = v["error_m"]["rms"].as_f64().expect("rms");
+    assert!(
+        rms_ones > 4.0 * rms,
+        "θ̂ = 1: {rms_ones} vs identified {rms}"
+    );
+}
+
+#[test]
+fn bad_simulate_and_track_configs_name_file_line_and_column() {
+    let dir = tempfile::tempdir().expect("tmp");
+    let cfg = dir.path().join("bad.toml");
+    std::fs::write(
+        &cfg,
+        "robot = \"khepera3\"\n[simulation]\nduraton_s = 5.0\n",
+    )
+    .expect("w");
+    let out = dir.path().join("never.csv");
+    let o = wheelid(&[
+        "simulate",
+        "--config",
+        cfg.to_str().expect("utf8"),
+        "--out",
+        out.to_str().expect("utf8"),
+    ]);
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert!(
+        e.contains("bad.toml") && e.contains("line 3, column 1") && e.contains("duraton_s"),
+        "{e}"
+    );
+    assert!(!e.contains("panicked"), "{e}");
+    assert!(!out.exists(), "nothing written on error");
+
+    std::fs::write(&cfg, "robot = \"turtlebot\"\n").expect("w");
+    let o = wheelid(&["track", "--config", cfg.to_str().expect("utf8")]);
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert!(e.contains("turtlebot") && e.contains("khepera3"), "{e}");
+
+    std::fs::write(&cfg, "[track.adaptation]\ngamma = [1.0, 1.0]\n").expect("w");
+    let o = wheelid(&["track", "--config", cfg.to_str().expect("utf8")]);
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert!(e.contains("bad.toml") && e.contains("line 2"), "{e}");
+
+    std::fs::write(
+        &cfg,
+        "[track.simulation.effects.input_delay]\ndelay_s = -1.0\n",
+    )
+    .expect("w");
+    let o = wheelid(&["track", "--config", cfg.to_str().expect("utf8")]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("input_delay.delay_s"), "{}", stderr(&o));
+}
