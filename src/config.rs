@@ -139,15 +139,20 @@ pub fn read_toml<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T> {
         .map_err(|e| anyhow::anyhow!("{}: {}", path.display(), toml_msg(&text, &e)))
 }
 
-/// The robot: a whole `profile` if given, else the built-in `name` (default `pioneer3dx`).
+/// The robot: the built-in `flag` (a command-line choice) if given, else a whole `profile`
+/// from the config, else the config's built-in `name` (default `pioneer3dx`).
 ///
 /// # Errors
 /// An unknown name, listing the known ones.
-pub fn robot_profile(name: Option<&str>, profile: Option<&RobotProfile>) -> Result<RobotProfile> {
-    if let Some(p) = profile {
+pub fn robot_profile(
+    flag: Option<&str>,
+    name: Option<&str>,
+    profile: Option<&RobotProfile>,
+) -> Result<RobotProfile> {
+    if let (None, Some(p)) = (flag, profile) {
         return Ok(p.clone());
     }
-    let name = name.unwrap_or("pioneer3dx");
+    let name = flag.or(name).unwrap_or("pioneer3dx");
     match RobotProfile::by_name(name) {
         Some(p) => Ok(p),
         None => bail!(

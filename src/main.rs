@@ -113,12 +113,9 @@ fn run_simulate(a: SimulateArgs) -> Result<()> {
         None => SimulateConfig::default(),
     };
     let robot = robot_profile(
-        a.robot.as_deref().or(cfg.robot.as_deref()),
-        if a.robot.is_some() {
-            None
-        } else {
-            cfg.profile.as_ref()
-        },
+        a.robot.as_deref(),
+        cfg.robot.as_deref(),
+        cfg.profile.as_ref(),
     )?;
     let mut sim = cfg.simulation.clone();
     if let Some(d) = a.duration {
@@ -171,12 +168,9 @@ fn run_track(a: TrackArgs) -> Result<()> {
         None => (TrackConfig::default(), PathBuf::new()),
     };
     let robot = robot_profile(
-        a.robot.as_deref().or(cfg.robot.as_deref()),
-        if a.robot.is_some() {
-            None
-        } else {
-            cfg.profile.as_ref()
-        },
+        a.robot.as_deref(),
+        cfg.robot.as_deref(),
+        cfg.profile.as_ref(),
     )?;
     let mut s = cfg.track.clone();
     let model = a
