@@ -5,7 +5,8 @@
 //! With u = (v_ref, ω_ref) the command the robot receives at its sample instants (held between
 //! them), the simulator applies, in this order, at every integration sub-step τ:
 //!
-//! 1. `input_delay`: u(τ − delay_s) (zero before the first command arrives);
+//! 1. `input_delay`: u(τ − delay_s) (before the first command arrives, the setpoint that holds
+//!    the initial state: zero for a robot at rest);
 //! 2. `velocity_saturation`: the setpoint clipped to ±v_max, ±w_max (the base refuses faster
 //!    setpoints, as ARIA's `TransVelMax`/`RotVelMax` do), so the response saturates while the
 //!    command goes on;
@@ -241,7 +242,9 @@ impl Effects {
         }
         if let Some(e) = self.payload_change {
             check(true, "payload_change.time_s", e.time_s)?;
-            wheelid_models::dynamics::check_theta(&e.theta_after)?;
+            wheelid_models::dynamics::check_theta(&e.theta_after).map_err(|err| {
+                Error::InvalidSetting(format!("effects: payload_change.theta_after: {err}"))
+            })?;
         }
         if let Some(e) = self.gain_drift {
             check(true, "gain_drift.rate_per_s", e.rate_per_s)?;

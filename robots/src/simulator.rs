@@ -42,7 +42,8 @@ pub struct SimSettings {
     pub seed: u64,
     /// Integration sub-steps per period.
     pub substeps: usize,
-    /// Whether to apply the encoder model and noise (false: exact instantaneous v, ω, pose).
+    /// Whether to apply the encoder model and noise (false: exact instantaneous v, ω, pose;
+    /// the `measurement_noise` effect, if on, still adds its noise to v, ω).
     pub measurement_noise: bool,
     /// Optional physics the 6-θ model leaves out (all off by default).
     pub effects: Effects,
@@ -167,10 +168,15 @@ impl SimRobot {
     }
 
     /// Places the robot: the point h at (x, y), heading ψ [rad], velocities v [m/s], ω [rad/s];
-    /// odometry restarts from there. Call before the first [`SimRobot::step`].
+    /// odometry restarts from there, and the setpoint in force is the one that holds (v, ω)
+    /// steady (θ4 v − θ3 ω², θ6 ω + θ5 v ω), so a rate limit does not brake a robot placed at
+    /// speed. Call before the first [`SimRobot::step`].
     pub fn set_state(&mut self, state: [f64; 5]) {
         self.s = state;
         let [x, y, psi, v, w] = state;
+        let th = self.theta_at(self.t);
+        self.command = [th[3] * v - th[2] * w * w, th[5] * w + th[4] * v * w];
+        self.setpoint = self.command;
         let a = self.profile.a;
         self.odom = [x - a * psi.cos(), y - a * psi.sin(), psi];
         self.last = Sample {
