@@ -219,12 +219,7 @@ fn run_track(a: TrackArgs) -> Result<()> {
         print!("{}", report::track_text(&robot, &s, &r));
     }
     if let Some(dir) = &a.plot {
-        let files = wheelid::plot::write_track_plots(&r, dir)?;
-        if !a.json {
-            for f in files {
-                println!("plot: {}", f.display());
-            }
-        }
+        list_plots(&wheelid::plot::write_track_plots(&r, dir)?, a.json);
     }
     Ok(())
 }
@@ -313,14 +308,18 @@ fn run_identify(a: IdentifyArgs) -> Result<()> {
         }
     }
     if let Some(dir) = &a.plot {
-        let files = wheelid::plot::write_plots(&id, dir)?;
-        if !a.json {
-            for f in files {
-                println!("plot: {}", f.display());
-            }
-        }
+        list_plots(&wheelid::plot::write_plots(&id, dir)?, a.json);
     }
     Ok(())
+}
+
+/// Lists the plot files written (not in JSON mode, whose stdout is JSON only).
+fn list_plots(files: &[PathBuf], json: bool) {
+    if !json {
+        for f in files {
+            println!("plot: {}", f.display());
+        }
+    }
 }
 
 fn main() -> Result<()> {
