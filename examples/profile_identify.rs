@@ -1,8 +1,8 @@
 //! Times the stages of `identify` on a 1,000,000-row simulated recording (a rough profile; the
 //! benchmark is `cargo bench --bench identify`).
 use std::time::Instant;
-use wheelid::core::RegressorModel;
 use wheelid::core::condition::{self, ConditionSettings};
+use wheelid::core::{DynamicModel, RegressorModel};
 use wheelid::models::VwPd;
 use wheelid::robots::{Excitation, RobotProfile, SimSettings, simulate_recording};
 

@@ -49,6 +49,9 @@ pub struct ChannelQuality {
 pub struct ModelFile {
     /// Model name (`wheel-pd`, `vw-pd`).
     pub model: String,
+    /// Estimator that gave θ (`ls`, `iv`, `oe`); absent in files written before estimators.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub estimator: Option<String>,
     /// θ1…θ6.
     pub theta: Vec<f64>,
     /// Standard errors.
@@ -66,6 +69,7 @@ impl ModelFile {
     pub fn from_identification(id: &Identification) -> Self {
         Self {
             model: id.model.clone(),
+            estimator: Some(id.estimator.name().to_owned()),
             theta: id.theta.clone(),
             std_err: id.std_err.clone(),
             cutoff_hz: id.cutoff_hz,

@@ -5,20 +5,23 @@
 //!    filter — with one cut-off for the run, chosen by the documented rule unless given);
 //! 2. **model**: build each recording's regression (eq. 4.2) and stack them per channel;
 //! 3. **fit** each channel's stacked problem with the solver (eq. 4.3–4.7, by SVD or
-//!    with bounds);
+//!    with bounds) — the least-squares answer — and then, unless least squares was asked for,
+//!    remove its errors-in-variables bias with the chosen [`Estimator`]: output error
+//!    (`wheelid_solvers::oe`, the default) or instrumental variables (`wheelid_solvers::iv`),
+//!    both started from the least-squares θ;
 //! 4. **validate**: simulate the identified model free-run from each recording's commands and
 //!    compare with the measurements (fit %, as MATLAB's `compare`); estimate θ4 and θ6 from
 //!    steady constant-command segments as the thesis's §4.1 suggests.
 
 use std::path::PathBuf;
 
-use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
 use wheelid_core::condition::{self, ConditionSettings, CutoffChoice};
 use wheelid_core::{
     BoundState, ChannelRegression, Conditioned, LinearProblem, Recording, RegressorModel,
-    SolveError, Solver, metrics,
+    SolveError, SolveStatus, Solver, metrics,
 };
+use wheelid_solvers::{InstrumentalVariables, OutputError};
 
 /// Errors of an identification run.
 #[derive(Debug, thiserror::Error)]
@@ -46,8 +49,61 @@ pub enum IdentifyError {
 pub struct IdentifySettings {
     /// Conditioning (cut-off, filter order, derivative stencil).
     pub condition: ConditionSettings,
-    /// Bounds on θ (lower, upper) for bounded solvers, one per parameter.
+    /// Bounds on θ (lower, upper) for bounded solvers, one per parameter (kept by the
+    /// bounded least-squares solver and by output error; the IV answer is projected onto them).
     pub bounds: Option<Vec<(f64, f64)>>,
+    /// The estimator whose θ is the answer.
+    pub estimator: Estimator,
+    /// Also run the other estimators and report every θ side by side.
+    pub compare: bool,
+}
+
+/// How θ is estimated from the recordings.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, clap::ValueEnum)]
+#[serde(rename_all = "snake_case")]
+pub enum Estimator {
+    /// Least squares on the filtered regression (Laut 2011 eq. 4.3–4.7): fast, but biased when
+    /// the regressors are noisy or coarsely sampled (errors in variables).
+    Ls,
+    /// Instrumental variables with simulated noise-free instruments, iterated
+    /// (`wheelid_solvers::iv`): linear and fast; removes the noise bias, not the
+    /// discretization error of the derivatives.
+    Iv,
+    /// Output error: θ whose free-run simulation matches the measurements
+    /// (`wheelid_solvers::oe`): no filter, no derivative, no cut-off in the answer.
+    #[default]
+    Oe,
+}
+
+impl Estimator {
+    /// Every estimator, in report order.
+    pub const ALL: [Estimator; 3] = [Estimator::Ls, Estimator::Iv, Estimator::Oe];
+
+    /// Short name (`ls`, `iv`, `oe`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Estimator::Ls => "ls",
+            Estimator::Iv => "iv",
+            Estimator::Oe => "oe",
+        }
+    }
+}
+
+/// One estimator's answer, for the side-by-side report.
+#[derive(Debug, Clone, Serialize)]
+pub struct EstimateReport {
+    /// Which estimator.
+    pub estimator: Estimator,
+    /// θ̂.
+    pub theta: Vec<f64>,
+    /// Standard errors of θ̂.
+    pub std_err: Vec<f64>,
+    /// How it ended.
+    pub status: SolveStatus,
+    /// Iterations (IV) or residual evaluations (OE); 1 for least squares.
+    pub iterations: usize,
+    /// Wall time [s].
+    pub seconds: f64,
 }
 
 /// One recording's part in the run.
@@ -63,6 +119,9 @@ pub struct FileReport {
     pub resampled_from: Option<f64>,
     /// Free-run fit % per channel on this recording.
     pub fit_percent: Vec<f64>,
+    /// Initial state (v0, ω0) of the free-run simulation: estimated by output error, else the
+    /// smoothed first sample.
+    pub initial: Vec<f64>,
 }
 
 /// Per-channel fit quality.
@@ -115,10 +174,22 @@ pub struct Identification {
     pub param_names: Vec<String>,
     /// Parameter units.
     pub param_units: Vec<String>,
+    /// The estimator whose answer `theta` is.
+    pub estimator: Estimator,
     /// θ̂.
     pub theta: Vec<f64>,
-    /// Standard errors of θ̂ (Newey–West over the filter's correlation length).
+    /// Standard errors of θ̂ (least squares and IV: Newey–West over the filter's correlation
+    /// length; output error: sandwich from the Jacobian, see `wheelid_solvers::oe`).
     pub std_err: Vec<f64>,
+    /// Every estimator run: least squares always (it is the start), the chosen one, and with
+    /// `compare` all of them, in [`Estimator::ALL`] order.
+    pub estimates: Vec<EstimateReport>,
+    /// How far θ moved from the least-squares answer, (θ̂ − θ̂_LS)/θ̂_LS in % per parameter:
+    /// a large shift means the regression was biased (noise in the regressors, coarse sampling).
+    pub ls_shift_percent: Vec<f64>,
+    /// Output-error residual standard deviation per channel (the measurement noise if the
+    /// model is right), when output error ran.
+    pub noise_std: Option<Vec<f64>>,
     /// Per-parameter bound state.
     pub bound_state: Vec<BoundState>,
     /// Cut-off used [Hz].
@@ -175,8 +246,8 @@ pub fn identify(
         .iter()
         .map(|c| model.regression(c))
         .collect::<Result<_, _>>()?;
-    let regressions = stack(&per_file);
-    // 3. fit
+    let regressions = ChannelRegression::stack(&per_file);
+    // 3. fit: least squares, then the chosen estimator from there.
     let p = model.params().len();
     let names: Vec<&str> = model.params().iter().map(|q| q.name).collect();
     let mut theta = vec![0.0; p];
@@ -189,6 +260,7 @@ pub fn identify(
         .map(|c| (1.0 / (c.dt * cutoff_hz)).ceil() as usize)
         .max()
         .unwrap_or(0);
+    let clock = std::time::Instant::now();
     for reg in &regressions {
         let ch_names: Vec<&str> = reg.params.iter().map(|&i| names[i]).collect();
         let ch_bounds: Option<Vec<(f64, f64)>> = settings
@@ -220,16 +292,106 @@ pub fn identify(
             reg.y.len(),
         ));
     }
+    let ls = EstimateReport {
+        estimator: Estimator::Ls,
+        theta: theta.clone(),
+        std_err: std_err.clone(),
+        status: SolveStatus::Solved,
+        iterations: 1,
+        seconds: clock.elapsed().as_secs_f64(),
+    };
+    let mut estimates = vec![ls.clone()];
+    let mut initial: Vec<Option<Vec<f64>>> = vec![None; conditioned.len()];
+    let mut noise_std = None;
+    let refined = |e: Estimator| e == settings.estimator || settings.compare;
+    if refined(Estimator::Iv) {
+        let clock = std::time::Instant::now();
+        let fit = InstrumentalVariables::default()
+            .fit(
+                model,
+                &conditioned,
+                &ls.theta,
+                cutoff_hz,
+                &settings.condition,
+                lags,
+            )
+            .map_err(|source| IdentifyError::Solve {
+                channel: "iv".into(),
+                source,
+            })?;
+        let mut th = fit.theta.clone();
+        let mut bs = vec![BoundState::Free; p];
+        if let Some(b) = &settings.bounds {
+            for i in 0..p {
+                if th[i] < b[i].0 {
+                    th[i] = b[i].0;
+                    bs[i] = BoundState::AtLower;
+                } else if th[i] > b[i].1 {
+                    th[i] = b[i].1;
+                    bs[i] = BoundState::AtUpper;
+                }
+            }
+        }
+        if settings.estimator == Estimator::Iv {
+            theta.clone_from(&th);
+            std_err.clone_from(&fit.std_err);
+            bound_state = bs;
+        }
+        estimates.push(EstimateReport {
+            estimator: Estimator::Iv,
+            theta: th,
+            std_err: fit.std_err,
+            status: fit.status,
+            iterations: fit.iterations,
+            seconds: clock.elapsed().as_secs_f64(),
+        });
+    }
+    if refined(Estimator::Oe) {
+        let oe = OutputError {
+            bounds: settings.bounds.clone(),
+            ..OutputError::default()
+        };
+        let uniform: Vec<Recording> = conditioned.iter().map(|c| c.recording.clone()).collect();
+        let fit = oe
+            .fit(model, &uniform, &ls.theta)
+            .map_err(|source| IdentifyError::Solve {
+                channel: "oe".into(),
+                source,
+            })?;
+        if settings.estimator == Estimator::Oe {
+            theta.clone_from(&fit.theta);
+            std_err.clone_from(&fit.std_err);
+            bound_state.clone_from(&fit.bound_state);
+            initial = fit.initial.iter().cloned().map(Some).collect();
+        }
+        noise_std = Some(fit.noise_std.clone());
+        estimates.push(EstimateReport {
+            estimator: Estimator::Oe,
+            theta: fit.theta,
+            std_err: fit.std_err,
+            status: fit.status,
+            iterations: fit.evaluations,
+            seconds: fit.seconds,
+        });
+    }
+    let ls_shift_percent = theta
+        .iter()
+        .zip(&ls.theta)
+        .map(|(t, l)| 100.0 * (t - l) / l.abs())
+        .collect();
     // 4. validate: free-run simulation per recording.
     let nch = model.channels().len();
     let mut series = Vec::new();
     let mut files = Vec::new();
     let mut all_meas = vec![Vec::new(); nch];
     let mut all_sim = vec![Vec::new(); nch];
-    for c in &conditioned {
+    for (c, x0) in conditioned.iter().zip(initial) {
         let rec = &c.recording;
         let measured = vec![rec.v.clone(), rec.w.clone()];
-        let initial = [c.smooth(&c.v)?[0], c.smooth(&c.w)?[0]];
+        let initial = match x0 {
+            Some(x) => x,
+            None => vec![c.smooth(&c.v)?[0], c.smooth(&c.w)?[0]],
+        };
         let simulated = model.simulate(&theta, rec, &initial)?;
         let fits: Vec<f64> = (0..nch)
             .map(|ch| metrics::fit_percent(&measured[ch], &simulated[ch]))
@@ -244,6 +406,7 @@ pub fn identify(
             dt: c.dt,
             resampled_from: c.resampled_from,
             fit_percent: fits,
+            initial,
         });
         series.push(FileSeries {
             source: c.source.clone(),
@@ -269,6 +432,10 @@ pub fn identify(
     Ok(Identification {
         model: model.name().into(),
         solver: solver.name().into(),
+        estimator: settings.estimator,
+        estimates,
+        ls_shift_percent,
+        noise_std,
         param_names: names.iter().map(|s| (*s).to_owned()).collect(),
         param_units: model.params().iter().map(|q| q.unit.to_owned()).collect(),
         theta,
@@ -285,36 +452,6 @@ pub fn identify(
         series,
         regressions,
     })
-}
-
-/// Stacks per-file regressions channel by channel (rows of file 1, then file 2, …).
-fn stack(per_file: &[Vec<ChannelRegression>]) -> Vec<ChannelRegression> {
-    let Some(first) = per_file.first() else {
-        return Vec::new();
-    };
-    first
-        .iter()
-        .enumerate()
-        .map(|(ch, proto)| {
-            let n: usize = per_file.iter().map(|f| f[ch].y.len()).sum();
-            let k = proto.x.ncols();
-            let mut x = DMatrix::zeros(n, k);
-            let mut y = DVector::zeros(n);
-            let mut row = 0;
-            for f in per_file {
-                let r = &f[ch];
-                x.view_mut((row, 0), (r.y.len(), k)).copy_from(&r.x);
-                y.rows_mut(row, r.y.len()).copy_from(&r.y);
-                row += r.y.len();
-            }
-            ChannelRegression {
-                channel: proto.channel,
-                params: proto.params.clone(),
-                x,
-                y,
-            }
-        })
-        .collect()
 }
 
 /// θ4 and θ6 from constant-command segments (thesis §4.1): in a segment where v_ref and ω_ref

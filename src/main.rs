@@ -6,7 +6,7 @@ use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
 use wheelid::config::{ExcitationConfig, SimulateConfig, TrackConfig, read_toml, robot_profile};
 use wheelid::files::{ModelFile, read_bounds};
-use wheelid::identify::{IdentifySettings, identify};
+use wheelid::identify::{Estimator, IdentifySettings, identify};
 use wheelid::robots::{
     Excitation, RobotProfile, SimSettings, TrajectorySpec, simulate_recording, track,
 };
@@ -231,10 +231,18 @@ struct IdentifyArgs {
     /// Model parameterization.
     #[arg(long, default_value = "vw-pd", value_parser = models::MODEL_NAMES)]
     model: String,
-    /// Least-squares solver.
+    /// Estimator: ls (the thesis's filtered regression), iv (instrumental variables) or oe
+    /// (output error, the default: unbiased, no cut-off in the answer).
+    #[arg(long, value_enum, default_value_t = Estimator::Oe)]
+    estimator: Estimator,
+    /// Run every estimator and show their θ side by side.
+    #[arg(long)]
+    compare: bool,
+    /// Least-squares solver (the regression every estimator starts from).
     #[arg(long, default_value = "ols", value_parser = solvers::SOLVER_NAMES)]
     solver: String,
-    /// Bounds on θ (TOML: theta_lower/theta_upper, or [physical.lower]/[physical.upper]); used by `--solver box`.
+    /// Bounds on θ (TOML: theta_lower/theta_upper, or [physical.lower]/[physical.upper]); kept by
+    /// `--estimator oe`, projected on by iv, and by `--solver box` for ls.
     #[arg(long)]
     bounds: Option<PathBuf>,
     /// Low-pass cut-off [Hz] (default: chosen from the commands' bandwidth, see the report).
@@ -286,9 +294,13 @@ fn run_identify(a: IdentifyArgs) -> Result<()> {
     let mut settings = IdentifySettings::default();
     settings.condition.cutoff_hz = a.cutoff;
     settings.condition.order = a.order;
+    settings.estimator = a.estimator;
+    settings.compare = a.compare;
     if let Some(path) = &a.bounds {
-        if a.solver != "box" {
-            bail!("--bounds needs --solver box (ordinary least squares is unbounded)");
+        if a.solver != "box" && a.estimator == Estimator::Ls {
+            bail!(
+                "--bounds with --estimator ls needs --solver box (ordinary least squares is unbounded)"
+            );
         }
         settings.bounds = Some(read_bounds(path, &a.model)?);
     }

@@ -23,6 +23,10 @@ pub fn to_json(id: &Identification, truth: Option<&[f64]>) -> Value {
     let mut v = json!({
         "model": id.model,
         "solver": id.solver,
+        "estimator": id.estimator,
+        "estimates": id.estimates,
+        "ls_shift_percent": id.ls_shift_percent,
+        "noise_std": id.noise_std,
         "theta": id.theta,
         "std_err": id.std_err,
         "param_names": id.param_names,
@@ -47,8 +51,9 @@ pub fn to_text(id: &Identification, truth: Option<&[f64]>) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "model {}  solver {}  samples {}  files {}",
+        "model {}  estimator {}  solver {}  samples {}  files {}",
         id.model,
+        id.estimator.name(),
         id.solver,
         id.samples,
         id.files.len()
@@ -112,6 +117,52 @@ pub fn to_text(id: &Identification, truth: Option<&[f64]>) -> String {
         let _ = writeln!(s);
     }
     let _ = writeln!(s);
+    if id.estimates.len() > 1 {
+        let _ = write!(s, "{:<8}", "param");
+        for e in &id.estimates {
+            let _ = write!(s, " {:>12} {:>9}", e.estimator.name(), "± 2σ");
+        }
+        let _ = writeln!(s, " {:>12}", "shift % vs ls");
+        for i in 0..id.theta.len() {
+            let _ = write!(s, "{:<8}", id.param_names[i]);
+            for e in &id.estimates {
+                let _ = write!(s, " {:>12.6} {:>9.6}", e.theta[i], 2.0 * e.std_err[i]);
+            }
+            let _ = writeln!(s, " {:>12.2}", id.ls_shift_percent[i]);
+        }
+        let _ = write!(s, "{:<8}", "time");
+        for e in &id.estimates {
+            let _ = write!(s, " {:>10.3} s {:>9}", e.seconds, "");
+        }
+        let _ = writeln!(s);
+        let _ = writeln!(s);
+    }
+    // Bias warning: the answer left the least-squares one by more than 3 of its σ and 1 %.
+    let moved: Vec<String> = (0..id.theta.len())
+        .filter(|&i| {
+            id.ls_shift_percent[i].abs() > 1.0
+                && (id.theta[i] - id.estimates[0].theta[i]).abs() > 3.0 * id.std_err[i]
+        })
+        .map(|i| format!("{} {:+.1} %", id.param_names[i], id.ls_shift_percent[i]))
+        .collect();
+    if id.estimator != crate::identify::Estimator::Ls && !moved.is_empty() {
+        let _ = writeln!(
+            s,
+            "warning: least squares was biased (errors in variables): {} moved by {} from the \
+             filtered regression; trust the {} answer and its intervals",
+            id.estimator.name(),
+            moved.join(", "),
+            id.estimator.name()
+        );
+        let _ = writeln!(s);
+    }
+    if let Some(sd) = &id.noise_std {
+        let _ = writeln!(
+            s,
+            "output-error residual std: v {:.5} m/s, ω {:.5} rad/s",
+            sd[0], sd[1]
+        );
+    }
     let _ = writeln!(
         s,
         "{:<8} {:>10} {:>14} {:>12}",

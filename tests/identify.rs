@@ -3,8 +3,8 @@
 
 use nalgebra::{DMatrix, DVector};
 use wheelid::core::condition::{self, ConditionSettings};
-use wheelid::core::{LinearProblem, Recording, RegressorModel, SolveError, Solver};
-use wheelid::identify::{IdentifyError, IdentifySettings, identify};
+use wheelid::core::{BoundState, LinearProblem, Recording, RegressorModel, SolveError, Solver};
+use wheelid::identify::{Estimator, IdentifyError, IdentifySettings, identify};
 use wheelid::models::{VwPd, WheelPd, dynamics};
 use wheelid::robots::{Excitation, RobotProfile, SimSettings, simulate_recording};
 use wheelid::solvers::{BoxLs, Ols};
@@ -131,7 +131,10 @@ fn embedded_pioneer_default_recovers_theta_within_2_percent() {
 fn multi_file_run_equals_the_stacked_regression() {
     let (_, a) = pioneer_recording(1, true, 0.1);
     let (_, b) = pioneer_recording(2, true, 0.1);
-    let mut s = IdentifySettings::default();
+    let mut s = IdentifySettings {
+        estimator: Estimator::Ls,
+        ..IdentifySettings::default()
+    };
     s.condition.cutoff_hz = Some(0.7);
     let id = identify(&[a.clone(), b.clone()], &WheelPd, &Ols::default(), &s).expect("identifies");
     // By hand: condition each file, build its regression, stack the rows, solve.
@@ -204,16 +207,14 @@ fn a_turn_rate_that_never_changes_is_rank_deficient_and_names_theta2() {
 #[test]
 fn box_solver_holds_bounds_and_agrees_with_ols_when_inactive() {
     let (robot, rec) = pioneer_recording(3, true, 0.1);
-    let ols = identify(
-        std::slice::from_ref(&rec),
-        &VwPd,
-        &Ols::default(),
-        &IdentifySettings::default(),
-    )
-    .expect("ols");
+    let ls = IdentifySettings {
+        estimator: Estimator::Ls,
+        ..IdentifySettings::default()
+    };
+    let ols = identify(std::slice::from_ref(&rec), &VwPd, &Ols::default(), &ls).expect("ols");
     let loose = IdentifySettings {
         bounds: Some(vec![(-10.0, 10.0); 6]),
-        ..IdentifySettings::default()
+        ..ls.clone()
     };
     let b = identify(std::slice::from_ref(&rec), &VwPd, &BoxLs::default(), &loose).expect("box");
     for i in 0..6 {
@@ -229,11 +230,21 @@ fn box_solver_holds_bounds_and_agrees_with_ols_when_inactive() {
     bounds[0] = (0.0, 0.2);
     let tight = IdentifySettings {
         bounds: Some(bounds),
-        ..IdentifySettings::default()
+        ..ls
     };
-    let b = identify(&[rec], &VwPd, &BoxLs::default(), &tight).expect("box");
+    let b = identify(std::slice::from_ref(&rec), &VwPd, &BoxLs::default(), &tight).expect("box");
     assert_eq!(b.theta[0], 0.2);
     assert!(robot.theta[0] > 0.2);
+    // Output error keeps the same bound: θ1 ends on it, the others stay free.
+    let oe = IdentifySettings {
+        estimator: Estimator::Oe,
+        ..tight
+    };
+    let b = identify(&[rec], &VwPd, &Ols::default(), &oe).expect("oe");
+    assert!(b.theta[0] <= 0.2, "θ1 = {}", b.theta[0]);
+    approx::assert_abs_diff_eq!(b.theta[0], 0.2, epsilon = 1e-6);
+    assert_eq!(b.bound_state[0], BoundState::AtUpper, "{:?}", b.bound_state);
+    assert!(b.bound_state[1..].iter().all(|s| *s == BoundState::Free));
 }
 
 fn husky_files() -> Option<Vec<std::path::PathBuf>> {

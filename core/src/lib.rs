@@ -1,11 +1,11 @@
 //! # wheelid-core
 //!
 //! The bottom layer of wheelid: the data (recordings, conditioned signals), the traits that the
-//! other crates implement ([`RegressorModel`], [`Solver`]) and the errors.
+//! other crates implement ([`DynamicModel`], [`RegressorModel`], [`Solver`]) and the errors.
 //!
 //! A run walks the layers once:
 //! **read** ([`recording`]) → **condition** ([`condition`], [`signal`]: resample, align, filter,
-//! differentiate) → **model** ([`RegressorModel`]: regressor, simulate, in `wheelid-models`) →
+//! differentiate) → **model** ([`RegressorModel`]: regressor; [`DynamicModel`]: simulate; in `wheelid-models`) →
 //! **fit** ([`Solver`], in `wheelid-solvers`) → **report** (the `wheelid` crate).
 
 pub mod condition;
@@ -18,6 +18,9 @@ pub mod solver;
 
 pub use condition::{ConditionSettings, Conditioned, CutoffChoice};
 pub use error::{Error, Location, Result};
-pub use model::{ChannelInfo, ChannelRegression, ParamInfo, RegressorModel, Simulation};
+pub use model::{
+    ChannelInfo, ChannelRegression, DynamicModel, ParamInfo, RegressorModel, Sensitivities,
+    Simulation,
+};
 pub use recording::{CommandHold, Recording, VelocitySampling};
 pub use solver::{BoundState, LinearFit, LinearProblem, SolveError, SolveStatus, Solver};

@@ -1,4 +1,17 @@
-//! The [`RegressorModel`] trait: models that are linear in their parameters,
+//! The model traits.
+//!
+//! [`DynamicModel`]: a model that simulates its outputs from a recording's commands (free run),
+//!
+//! ```text
+//! ŷ(t_k) = G(θ, x0; u(t), t ≤ t_k)      u = (v_ref, ω_ref), y = (v, ω),
+//! ```
+//!
+//! and may give the output sensitivities ∂ŷ/∂θ, ∂ŷ/∂x0 that output-error fitting needs (forward
+//! sensitivity equations; the fitter falls back to finite differences). Any such model can be
+//! fitted by simulation error, including models whose parameters enter non-linearly (a dead
+//! time, a rate limit, a saturation level).
+//!
+//! [`RegressorModel`]: a dynamic model that is also linear in its parameters,
 //!
 //! ```text
 //! y_c = Φ_c(signals) · θ_c      for each output channel c,
@@ -7,8 +20,6 @@
 //! where y_c is a (filtered) command, Φ_c the n × p_c regressor built from conditioned
 //! measurements, and θ_c the slice of the full parameter vector θ that channel c uses
 //! (Laut 2011 eq. 4.1–4.2 splits the six θ of eq. 2.19 into two 3-parameter channels).
-//! A model also simulates its own output from the commands (free-run), which is how its fit
-//! is judged.
 
 use nalgebra::{DMatrix, DVector};
 
@@ -32,9 +43,10 @@ pub struct ParamInfo {
 pub struct ChannelInfo {
     /// Channel name, the measured column it predicts: `v` or `w`.
     pub name: &'static str,
-    /// The command that forms the regressand: `v_ref` or `w_ref`.
+    /// The command that drives it (the regressand of a regressor model): `v_ref` or `w_ref`.
     pub command: &'static str,
-    /// Indices into θ of this channel's parameters, in regressor-column order.
+    /// Indices into θ of the parameters in this channel's equation (regressor-column order for
+    /// a [`RegressorModel`]).
     pub params: &'static [usize],
 }
 
@@ -51,28 +63,67 @@ pub struct ChannelRegression {
     pub y: DVector<f64>,
 }
 
+impl ChannelRegression {
+    /// Stacks per-recording regressions channel by channel (rows of recording 1, then 2, …):
+    /// one multi-experiment problem. `per_file[r][c]` is recording r's channel c; every
+    /// recording must list the same channels with the same columns.
+    pub fn stack(per_file: &[Vec<ChannelRegression>]) -> Vec<ChannelRegression> {
+        let Some(first) = per_file.first() else {
+            return Vec::new();
+        };
+        first
+            .iter()
+            .enumerate()
+            .map(|(ch, proto)| {
+                let n: usize = per_file.iter().map(|f| f[ch].y.len()).sum();
+                let k = proto.x.ncols();
+                let mut x = DMatrix::zeros(n, k);
+                let mut y = DVector::zeros(n);
+                let mut row = 0;
+                for f in per_file {
+                    let r = &f[ch];
+                    x.view_mut((row, 0), (r.y.len(), k)).copy_from(&r.x);
+                    y.rows_mut(row, r.y.len()).copy_from(&r.y);
+                    row += r.y.len();
+                }
+                ChannelRegression {
+                    channel: proto.channel,
+                    params: proto.params.clone(),
+                    x,
+                    y,
+                }
+            })
+            .collect()
+    }
+}
+
 /// Free-run output of a model: one simulated series per channel, in channel order.
 pub type Simulation = Vec<Vec<f64>>;
 
-/// A model linear in its parameters, with a free-run simulator.
+/// Output sensitivities of a free-run simulation, per channel c, on the recording's time base:
+/// `theta[c]` is n × p with entries ∂ŷ_c(t_k)/∂θ_j, `initial[c]` is n × s with entries
+/// ∂ŷ_c(t_k)/∂x0_i (s = number of channels: the initial state is one value per channel).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Sensitivities {
+    /// ∂ŷ_c/∂θ, one n × p matrix per channel.
+    pub theta: Vec<DMatrix<f64>>,
+    /// ∂ŷ_c/∂x0, one n × s matrix per channel.
+    pub initial: Vec<DMatrix<f64>>,
+}
+
+/// A model that simulates its outputs from the commands of a recording.
 ///
-/// Implementations: `wheelid_models::WheelPd` (Laut 2011 §2.2) and `wheelid_models::VwPd`
-/// (Appendix A.3).
-pub trait RegressorModel {
+/// Implementations: `wheelid_models::WheelPd` and `wheelid_models::VwPd` (Laut 2011 eq. 2.19,
+/// with analytic sensitivities).
+pub trait DynamicModel {
     /// Model name as used on the command line and in files, e.g. `vw-pd`.
     fn name(&self) -> &str;
 
     /// The parameters θ, in order.
     fn params(&self) -> &[ParamInfo];
 
-    /// The output channels.
+    /// The output channels (also the state the simulation starts from: one value each).
     fn channels(&self) -> &[ChannelInfo];
-
-    /// Builds each channel's regression from a conditioned recording.
-    ///
-    /// # Errors
-    /// Conditioning errors (recording too short for the filter).
-    fn regression(&self, data: &Conditioned) -> Result<Vec<ChannelRegression>>;
 
     /// Free-run simulation of the channels from the recording's commands (applied as the
     /// recording says: held or sampled), starting from `initial` (one value per channel), on the
@@ -82,4 +133,31 @@ pub trait RegressorModel {
     /// # Errors
     /// If `theta` has the wrong length or makes the model singular.
     fn simulate(&self, theta: &[f64], rec: &Recording, initial: &[f64]) -> Result<Simulation>;
+
+    /// The same simulation with its output sensitivities, or `None` if the model does not
+    /// provide them (fitters then use finite differences of [`DynamicModel::simulate`]).
+    ///
+    /// # Errors
+    /// As [`DynamicModel::simulate`].
+    fn simulate_with_sensitivities(
+        &self,
+        theta: &[f64],
+        rec: &Recording,
+        initial: &[f64],
+    ) -> Result<Option<(Simulation, Sensitivities)>> {
+        let _ = (theta, rec, initial);
+        Ok(None)
+    }
+}
+
+/// A dynamic model linear in its parameters: each channel's command is a regressor times θ.
+///
+/// Implementations: `wheelid_models::WheelPd` (Laut 2011 §2.2) and `wheelid_models::VwPd`
+/// (Appendix A.3).
+pub trait RegressorModel: DynamicModel {
+    /// Builds each channel's regression from a conditioned recording.
+    ///
+    /// # Errors
+    /// Conditioning errors (recording too short for the filter).
+    fn regression(&self, data: &Conditioned) -> Result<Vec<ChannelRegression>>;
 }

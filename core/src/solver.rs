@@ -32,8 +32,12 @@ pub struct LinearProblem<'a> {
 pub enum SolveStatus {
     /// Solved to the solver's tolerance.
     Solved,
-    /// Solved to a reduced tolerance (interior-point solvers).
+    /// Solved to a reduced tolerance (interior-point solvers), or no further improvement
+    /// possible at the requested tolerance (iterative solvers).
     AlmostSolved,
+    /// An iterative solver stopped at its iteration or evaluation limit; the result is the
+    /// best point found, not a converged one.
+    IterationLimit,
 }
 
 /// Whether a bounded parameter ended on a bound.

@@ -19,8 +19,8 @@ pub mod physical;
 pub mod regressor;
 
 use wheelid_core::{
-    ChannelInfo, ChannelRegression, Conditioned, ParamInfo, Recording, RegressorModel, Result,
-    Simulation,
+    ChannelInfo, ChannelRegression, Conditioned, DynamicModel, ParamInfo, Recording,
+    RegressorModel, Result, Sensitivities, Simulation,
 };
 
 pub use physical::{Parameterization, VwPdConstants, VwPdMap, WheelPdConstants, WheelPdMap};
@@ -49,7 +49,7 @@ macro_rules! six_theta_model {
             }
         }
 
-        impl RegressorModel for $ty {
+        impl DynamicModel for $ty {
             fn name(&self) -> &str {
                 $name
             }
@@ -59,11 +59,23 @@ macro_rules! six_theta_model {
             fn channels(&self) -> &[ChannelInfo] {
                 &regressor::CHANNELS
             }
-            fn regression(&self, data: &Conditioned) -> Result<Vec<ChannelRegression>> {
-                regressor::regression(data)
-            }
             fn simulate(&self, theta: &[f64], rec: &Recording, initial: &[f64]) -> Result<Simulation> {
                 Ok(dynamics::simulate(theta, rec, initial)?.to_vec())
+            }
+            fn simulate_with_sensitivities(
+                &self,
+                theta: &[f64],
+                rec: &Recording,
+                initial: &[f64],
+            ) -> Result<Option<(Simulation, Sensitivities)>> {
+                let (y, s) = dynamics::simulate_with_sensitivities(theta, rec, initial)?;
+                Ok(Some((y.to_vec(), s)))
+            }
+        }
+
+        impl RegressorModel for $ty {
+            fn regression(&self, data: &Conditioned) -> Result<Vec<ChannelRegression>> {
+                regressor::regression(data)
             }
         }
     };

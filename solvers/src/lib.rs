@@ -6,11 +6,23 @@
 //!   parameters the data cannot separate;
 //! * [`BoxLs`] (`box`): least squares with bounds lb ≤ θ ≤ ub through Clarabel — the thesis's
 //!   parameter projection (§4.1).
+//!
+//! and the estimators that remove the errors-in-variables bias of the regression (the command
+//! is exact; the regressors carry the noise):
+//! * [`oe`]: output error — θ that makes any [`wheelid_core::DynamicModel`]'s free-run
+//!   simulation match the measurements (Levenberg–Marquardt, bounds, sandwich intervals);
+//! * [`iv`]: instrumental variables with instruments from the model's own noise-free
+//!   simulation, iterated — linear and fast.
 
 mod boxls;
+pub mod iv;
+pub mod oe;
 mod ols;
 
 pub use boxls::BoxLs;
+
+pub use iv::{InstrumentalVariables, IvFit};
+pub use oe::{OutputError, OutputErrorFit};
 pub use ols::Ols;
 
 /// Names of the built-in solvers.

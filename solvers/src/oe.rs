@@ -1,0 +1,605 @@
+//! Output-error (simulation-error) estimation of any [`DynamicModel`].
+//!
+//! The parameters and each recording's initial state are chosen to make the model's free-run
+//! response to the recorded commands match the measured outputs:
+//!
+//! ```text
+//! (θ̂, x̂0_1 … x̂0_R) = argmin  Σ_r Σ_c Σ_k  ( y_{r,c}(t_k) − ŷ_{r,c}(t_k; θ, x0_r) )² / σ_c²
+//!                     subject to lb ≤ θ ≤ ub
+//! ```
+//!
+//! where ŷ is [`DynamicModel::simulate`] — commands applied as the recording says (zero-order
+//! hold between samples), outputs as the recording samples them (instants or window averages) —
+//! so the command, known exactly, stays on the input side and the measurement noise on the
+//! output side: no filter, no derivative, no cut-off, and no errors-in-variables bias (Ljung,
+//! *System Identification*, 2nd ed., §7.3; the output-error model of §4.2).
+//!
+//! **Minimisation.** Levenberg–Marquardt (Moré's MINPACK `lmder`, through the
+//! `levenberg-marquardt` crate), started from a given θ (the least-squares answer). The
+//! Jacobian comes from the model's forward sensitivities when it has them
+//! ([`DynamicModel::simulate_with_sensitivities`]), else from central differences of the
+//! simulation. Bounds are kept by the MINUIT/lmfit change of variables,
+//! θ = lb + (ub − lb)(1 + sin u)/2 (one side: θ = lb − 1 + √(u² + 1)), so the search is
+//! unconstrained in u and every trial θ is feasible.
+//!
+//! **Weights.** σ_c is the residual standard deviation of channel c: first at the starting θ,
+//! then once more at the first optimum, after which the problem is solved again (two passes;
+//! the second starts converged and costs a few evaluations).
+//!
+//! **Uncertainty.** At θ̂ the weighted Jacobian J (rows time-major: sample k, then channel) and
+//! the weighted residuals e give the sandwich covariance
+//!
+//! ```text
+//! Cov = (JᵀJ)⁻¹ (Σ_l w_l Σ_t g_t g_{t+l}ᵀ) (JᵀJ)⁻¹ · N/(N − P),   g_t = J[t,:]ᵀ e_t,
+//! ```
+//!
+//! with Bartlett weights w_l = 1 − l/(L + 1) over L = 4 (n/100)^{2/9} samples (Newey & West
+//! 1994), so that coloured residuals (encoder quantization, unmodelled dynamics) widen the
+//! intervals instead of being ignored. P counts θ and the initial states.
+
+use std::time::Instant;
+
+use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, TerminationReason};
+use nalgebra::{DMatrix, DVector};
+use nalgebra034 as na;
+use wheelid_core::{BoundState, DynamicModel, LinearProblem, Recording, SolveError, SolveStatus};
+
+use crate::ols;
+
+/// Settings of an output-error fit (the result is an [`OutputErrorFit`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct OutputError {
+    /// Box bounds (lower, upper) on θ, one per parameter; ±∞ for none.
+    pub bounds: Option<Vec<(f64, f64)>>,
+    /// Estimate each recording's initial state (default); otherwise hold it at the first
+    /// measured sample.
+    pub estimate_initial: bool,
+    /// Relative tolerance on the cost and the step (MINPACK `ftol` = `xtol`).
+    pub tolerance: f64,
+    /// Limit on residual evaluations per pass, as a multiple of (parameters + 1).
+    pub patience: usize,
+    /// Residual correlation length in samples for the covariance; `None`: the Newey–West rule
+    /// L = ⌊4 (n/100)^{2/9}⌋ with n the samples of the longest recording.
+    pub correlation_lags: Option<usize>,
+}
+
+impl Default for OutputError {
+    fn default() -> Self {
+        Self {
+            bounds: None,
+            estimate_initial: true,
+            tolerance: 1e-10,
+            patience: 100,
+            correlation_lags: None,
+        }
+    }
+}
+
+/// A fitted output-error model.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OutputErrorFit {
+    /// θ̂, one per model parameter.
+    pub theta: Vec<f64>,
+    /// Standard errors of θ̂ (sandwich covariance, see the module doc).
+    pub std_err: Vec<f64>,
+    /// Covariance of θ̂, p × p (the θ block of the full covariance).
+    pub covariance: DMatrix<f64>,
+    /// Initial state per recording, one value per channel.
+    pub initial: Vec<Vec<f64>>,
+    /// Residual standard deviation per channel, in the channel's unit (the weights' σ_c).
+    pub noise_std: Vec<f64>,
+    /// Weighted cost Σ e²/σ² at θ̂ over all residuals.
+    pub cost: f64,
+    /// Number of residuals (samples × channels over all recordings).
+    pub residuals: usize,
+    /// Residual evaluations (simulations) used, both passes.
+    pub evaluations: usize,
+    /// How the minimisation ended.
+    pub status: SolveStatus,
+    /// Per-parameter bound state.
+    pub bound_state: Vec<BoundState>,
+    /// Residual correlation length used for the covariance [samples].
+    pub correlation_lags: usize,
+    /// Wall time of the fit [s].
+    pub seconds: f64,
+}
+
+/// The change of variables that keeps one parameter inside its bounds.
+#[derive(Debug, Clone, Copy)]
+enum Transform {
+    Free,
+    Both(f64, f64),
+    Lower(f64),
+    Upper(f64),
+}
+
+impl Transform {
+    fn new((lo, hi): (f64, f64)) -> Self {
+        match (lo.is_finite(), hi.is_finite()) {
+            (true, true) => Self::Both(lo, hi),
+            (true, false) => Self::Lower(lo),
+            (false, true) => Self::Upper(hi),
+            (false, false) => Self::Free,
+        }
+    }
+    fn theta(self, u: f64) -> f64 {
+        match self {
+            Self::Free => u,
+            Self::Both(lo, hi) => lo + (hi - lo) * (1.0 + u.sin()) / 2.0,
+            Self::Lower(lo) => lo - 1.0 + (u * u + 1.0).sqrt(),
+            Self::Upper(hi) => hi + 1.0 - (u * u + 1.0).sqrt(),
+        }
+    }
+    fn dtheta_du(self, u: f64) -> f64 {
+        match self {
+            Self::Free => 1.0,
+            Self::Both(lo, hi) => (hi - lo) * u.cos() / 2.0,
+            Self::Lower(_) => u / (u * u + 1.0).sqrt(),
+            Self::Upper(_) => -u / (u * u + 1.0).sqrt(),
+        }
+    }
+    /// u for θ; θ is first moved a hair inside the bounds so that the derivative is not 0.
+    fn u(self, theta: f64) -> f64 {
+        match self {
+            Self::Free => theta,
+            Self::Both(lo, hi) => {
+                let x = (2.0 * (theta - lo) / (hi - lo) - 1.0).clamp(-1.0 + 1e-9, 1.0 - 1e-9);
+                x.asin()
+            }
+            Self::Lower(lo) => ((theta - lo + 1.0).max(1.0 + 1e-9).powi(2) - 1.0).sqrt(),
+            Self::Upper(hi) => ((hi - theta + 1.0).max(1.0 + 1e-9).powi(2) - 1.0).sqrt(),
+        }
+    }
+}
+
+/// The least-squares problem handed to Levenberg–Marquardt: parameters u = (u_θ, x0_1, …).
+struct Problem<'a, M: ?Sized> {
+    model: &'a M,
+    recs: &'a [Recording],
+    /// 1/σ_c per channel.
+    weight: Vec<f64>,
+    transform: Vec<Transform>,
+    /// Initial states when they are not estimated.
+    fixed_initial: Option<Vec<Vec<f64>>>,
+    u: na::DVector<f64>,
+    /// Offsets of each recording's rows.
+    offsets: Vec<usize>,
+    rows: usize,
+}
+
+/// Weighted residual of a failed or diverged simulation: large enough that Levenberg–Marquardt
+/// rejects the step and shrinks its trust region.
+const PENALTY: f64 = 1e8;
+
+impl<M: DynamicModel + ?Sized> Problem<'_, M> {
+    fn p(&self) -> usize {
+        self.transform.len()
+    }
+    fn nch(&self) -> usize {
+        self.model.channels().len()
+    }
+    fn theta_of(&self, u: &na::DVector<f64>) -> Vec<f64> {
+        self.transform
+            .iter()
+            .zip(u.iter())
+            .map(|(t, &x)| t.theta(x))
+            .collect()
+    }
+    fn initial_of(&self, u: &na::DVector<f64>, r: usize) -> Vec<f64> {
+        match &self.fixed_initial {
+            Some(x) => x[r].clone(),
+            None => {
+                let (p, s) = (self.p(), self.nch());
+                u.as_slice()[p + r * s..p + (r + 1) * s].to_vec()
+            }
+        }
+    }
+    /// Unweighted residuals y − ŷ per recording and channel, or `None` if a simulation failed
+    /// or diverged.
+    fn raw_residuals(&self, theta: &[f64], u: &na::DVector<f64>) -> Option<Vec<Vec<Vec<f64>>>> {
+        let mut out = Vec::with_capacity(self.recs.len());
+        for (r, rec) in self.recs.iter().enumerate() {
+            let sim = self
+                .model
+                .simulate(theta, rec, &self.initial_of(u, r))
+                .ok()?;
+            let meas = measured(rec);
+            let mut per = Vec::with_capacity(sim.len());
+            for (c, y) in sim.iter().enumerate() {
+                if y.len() != rec.len() || y.iter().any(|x| !x.is_finite()) {
+                    return None;
+                }
+                per.push(meas[c].iter().zip(y).map(|(m, s)| m - s).collect());
+            }
+            out.push(per);
+        }
+        Some(out)
+    }
+    /// ∂ŷ/∂(θ, x0) of recording `r`, per channel an n × (p + s) matrix.
+    fn sensitivities(
+        &self,
+        theta: &[f64],
+        x0: &[f64],
+        rec: &Recording,
+    ) -> Option<Vec<DMatrix<f64>>> {
+        let (p, s, n) = (self.p(), self.nch(), rec.len());
+        if let Ok(Some((_, sens))) = self.model.simulate_with_sensitivities(theta, rec, x0) {
+            return Some(
+                (0..s)
+                    .map(|c| {
+                        let mut m = DMatrix::zeros(n, p + s);
+                        m.columns_mut(0, p).copy_from(&sens.theta[c]);
+                        m.columns_mut(p, s).copy_from(&sens.initial[c]);
+                        m
+                    })
+                    .collect(),
+            );
+        }
+        // Central differences, step ~ 1e-5 relative (above the integrator's sub-step jitter).
+        let mut out = vec![DMatrix::zeros(n, p + s); s];
+        let scale = theta.iter().fold(0.0f64, |a, x| a.max(x.abs())).max(1e-12);
+        for j in 0..p + s {
+            let mut th = theta.to_vec();
+            let mut x = x0.to_vec();
+            let base = if j < p { th[j] } else { x[j - p] };
+            let h = 1e-5 * (base.abs() + 1e-3 * scale);
+            let mut eval = |delta: f64| {
+                if j < p {
+                    th[j] = base + delta;
+                } else {
+                    x[j - p] = base + delta;
+                }
+                self.model.simulate(&th, rec, &x).ok()
+            };
+            let up = eval(h)?;
+            let dn = eval(-h)?;
+            for c in 0..s {
+                for k in 0..n {
+                    out[c][(k, j)] = (up[c][k] - dn[c][k]) / (2.0 * h);
+                }
+            }
+        }
+        Some(out)
+    }
+    /// Weighted Jacobian of the residuals with respect to (θ, x0) — not u — time-major rows.
+    fn jacobian_theta(&self, u: &na::DVector<f64>) -> Option<DMatrix<f64>> {
+        let (p, s) = (self.p(), self.nch());
+        let cols = p + self
+            .fixed_initial
+            .as_ref()
+            .map_or(s * self.recs.len(), |_| 0);
+        let theta = self.theta_of(u);
+        let mut jac = DMatrix::zeros(self.rows, cols);
+        for (r, rec) in self.recs.iter().enumerate() {
+            let sens = self.sensitivities(&theta, &self.initial_of(u, r), rec)?;
+            for (c, (sc, &w)) in sens.iter().zip(&self.weight).enumerate() {
+                for k in 0..rec.len() {
+                    let row = self.offsets[r] + k * s + c;
+                    for j in 0..p {
+                        jac[(row, j)] = -w * sc[(k, j)];
+                    }
+                    if self.fixed_initial.is_none() {
+                        for i in 0..s {
+                            jac[(row, p + r * s + i)] = -w * sc[(k, p + i)];
+                        }
+                    }
+                }
+            }
+        }
+        jac.iter().all(|x| x.is_finite()).then_some(jac)
+    }
+}
+
+/// The measured output columns of a recording, in channel order (v, ω).
+fn measured(rec: &Recording) -> [&[f64]; 2] {
+    [&rec.v, &rec.w]
+}
+
+impl<M: DynamicModel + ?Sized> LeastSquaresProblem<f64, na::Dyn, na::Dyn> for Problem<'_, M> {
+    type ResidualStorage = na::VecStorage<f64, na::Dyn, na::U1>;
+    type JacobianStorage = na::VecStorage<f64, na::Dyn, na::Dyn>;
+    type ParameterStorage = na::VecStorage<f64, na::Dyn, na::U1>;
+
+    fn set_params(&mut self, u: &na::DVector<f64>) {
+        self.u.copy_from(u);
+    }
+
+    fn params(&self) -> na::DVector<f64> {
+        self.u.clone()
+    }
+
+    fn residuals(&self) -> Option<na::DVector<f64>> {
+        let theta = self.theta_of(&self.u);
+        let Some(raw) = self.raw_residuals(&theta, &self.u) else {
+            return Some(na::DVector::from_element(self.rows, PENALTY));
+        };
+        let s = self.nch();
+        let mut out = na::DVector::zeros(self.rows);
+        for (r, per) in raw.iter().enumerate() {
+            for (c, e) in per.iter().enumerate() {
+                for (k, x) in e.iter().enumerate() {
+                    out[self.offsets[r] + k * s + c] = self.weight[c] * x;
+                }
+            }
+        }
+        Some(out)
+    }
+
+    fn jacobian(&self) -> Option<na::DMatrix<f64>> {
+        let jac = self.jacobian_theta(&self.u)?;
+        let p = self.p();
+        let chain: Vec<f64> = self
+            .transform
+            .iter()
+            .zip(self.u.iter())
+            .map(|(t, &x)| t.dtheta_du(x))
+            .collect();
+        Some(na::DMatrix::from_fn(jac.nrows(), jac.ncols(), |i, j| {
+            if j < p {
+                jac[(i, j)] * chain[j]
+            } else {
+                jac[(i, j)]
+            }
+        }))
+    }
+}
+
+impl OutputError {
+    /// Fits `model` to `recordings` by output error, starting from `theta0`.
+    ///
+    /// Every recording must have the outputs the model's channels name (`v`, `w`), at least
+    /// as many samples as there are unknowns, and `theta0` must simulate.
+    ///
+    /// # Errors
+    /// [`SolveError::InvalidProblem`] for wrong lengths, bad bounds, or a starting θ whose
+    /// simulation fails; [`SolveError::RankDeficient`] if the recordings cannot separate some
+    /// parameters at θ̂; [`SolveError::Numerical`] if the minimiser stops on a failure.
+    pub fn fit<M: DynamicModel + ?Sized>(
+        &self,
+        model: &M,
+        recordings: &[Recording],
+        theta0: &[f64],
+    ) -> Result<OutputErrorFit, SolveError> {
+        let clock = Instant::now();
+        let p = model.params().len();
+        let s = model.channels().len();
+        if s != 2 {
+            return Err(SolveError::InvalidProblem(format!(
+                "output error fits (v, ω) outputs; model `{}` has {s} channels",
+                model.name()
+            )));
+        }
+        if theta0.len() != p {
+            return Err(SolveError::InvalidProblem(format!(
+                "θ0 has {} values, model `{}` has {p} parameters",
+                theta0.len(),
+                model.name()
+            )));
+        }
+        if recordings.is_empty() {
+            return Err(SolveError::InvalidProblem("no recording".into()));
+        }
+        let bounds = match &self.bounds {
+            Some(b) if b.len() != p => {
+                return Err(SolveError::InvalidProblem(format!(
+                    "{} bounds for {p} parameters",
+                    b.len()
+                )));
+            }
+            Some(b) => b.clone(),
+            None => vec![(f64::NEG_INFINITY, f64::INFINITY); p],
+        };
+        for (i, &(lo, hi)) in bounds.iter().enumerate() {
+            if lo.is_nan() || hi.is_nan() || lo >= hi {
+                return Err(SolveError::Infeasible(format!(
+                    "{}: lower {lo} is not below upper {hi}",
+                    model.params()[i].name
+                )));
+            }
+        }
+        let transform: Vec<Transform> = bounds.iter().map(|&b| Transform::new(b)).collect();
+        let unknowns = p + if self.estimate_initial {
+            s * recordings.len()
+        } else {
+            0
+        };
+        let mut offsets = Vec::with_capacity(recordings.len());
+        let mut rows = 0;
+        for rec in recordings {
+            offsets.push(rows);
+            rows += rec.len() * s;
+        }
+        if rows <= unknowns {
+            return Err(SolveError::InvalidProblem(format!(
+                "{rows} residuals cannot determine {unknowns} unknowns"
+            )));
+        }
+        let first: Vec<Vec<f64>> = recordings
+            .iter()
+            .map(|r| measured(r).iter().map(|y| y[0]).collect())
+            .collect();
+        let mut u0: Vec<f64> = transform.iter().zip(theta0).map(|(t, &x)| t.u(x)).collect();
+        if self.estimate_initial {
+            u0.extend(first.iter().flatten());
+        }
+        let mut problem = Problem {
+            model,
+            recs: recordings,
+            weight: vec![1.0; s],
+            transform,
+            fixed_initial: (!self.estimate_initial).then(|| first.clone()),
+            u: na::DVector::from_vec(u0),
+            offsets,
+            rows,
+        };
+        let lm = LevenbergMarquardt::new()
+            .with_ftol(self.tolerance)
+            .with_xtol(self.tolerance)
+            .with_gtol(0.0)
+            .with_patience(self.patience);
+        let mut evaluations = 0;
+        let mut termination = TerminationReason::NoParameters;
+        for _pass in 0..2 {
+            let theta = problem.theta_of(&problem.u);
+            let raw = problem.raw_residuals(&theta, &problem.u).ok_or_else(|| {
+                SolveError::InvalidProblem(format!(
+                    "the model does not simulate (finitely) at θ = {theta:?}"
+                ))
+            })?;
+            problem.weight = channel_std(&raw, rows, unknowns)
+                .iter()
+                .map(|&sd| 1.0 / sd.max(1e-12))
+                .collect();
+            let (solved, report) = lm.minimize(problem);
+            problem = solved;
+            evaluations += report.number_of_evaluations;
+            termination = report.termination;
+            if !termination.was_successful()
+                && !matches!(
+                    termination,
+                    TerminationReason::LostPatience | TerminationReason::NoImprovementPossible(_)
+                )
+            {
+                return Err(SolveError::Numerical(format!(
+                    "Levenberg–Marquardt stopped: {termination:?}"
+                )));
+            }
+        }
+        let status = match termination {
+            TerminationReason::LostPatience => SolveStatus::IterationLimit,
+            TerminationReason::NoImprovementPossible(_) => SolveStatus::AlmostSolved,
+            _ => SolveStatus::Solved,
+        };
+        // Uncertainty at θ̂ (module doc).
+        let u = problem.u.clone();
+        let theta = problem.theta_of(&u);
+        let raw = problem
+            .raw_residuals(&theta, &u)
+            .ok_or_else(|| SolveError::Numerical("the fitted model does not simulate".into()))?;
+        let noise_std = channel_std(&raw, rows, unknowns);
+        let jac = problem
+            .jacobian_theta(&u)
+            .ok_or_else(|| SolveError::Numerical("non-finite sensitivities at θ̂".into()))?;
+        let mut e = DVector::zeros(rows);
+        for (r, per) in raw.iter().enumerate() {
+            for (c, ec) in per.iter().enumerate() {
+                for (k, x) in ec.iter().enumerate() {
+                    e[problem.offsets[r] + k * s + c] = problem.weight[c] * x;
+                }
+            }
+        }
+        let longest = recordings.iter().map(Recording::len).max().unwrap_or(0);
+        let lags = self
+            .correlation_lags
+            .unwrap_or_else(|| (4.0 * (longest as f64 / 100.0).powf(2.0 / 9.0)).floor() as usize);
+        let mut names: Vec<String> = model.params().iter().map(|q| q.name.to_owned()).collect();
+        if self.estimate_initial {
+            for r in 0..recordings.len() {
+                for c in model.channels() {
+                    names.push(format!("{}0 of recording {}", c.name, r + 1));
+                }
+            }
+        }
+        let name_refs: Vec<&str> = names.iter().map(String::as_str).collect();
+        let lp = LinearProblem {
+            x: &jac,
+            y: &e,
+            names: &name_refs,
+            bounds: None,
+            correlation_lags: lags * s,
+        };
+        let d = ols::decompose(&lp, 1e-12)?;
+        let full = ols::covariance(&d, &e, lp.correlation_lags);
+        let covariance = full.view((0, 0), (p, p)).into_owned();
+        let initial = (0..recordings.len())
+            .map(|r| problem.initial_of(&u, r))
+            .collect();
+        let bound_state = theta
+            .iter()
+            .zip(&bounds)
+            .map(|(&x, &(lo, hi))| {
+                let tol = 1e-9 * (1.0 + x.abs());
+                if x - lo <= tol {
+                    BoundState::AtLower
+                } else if hi - x <= tol {
+                    BoundState::AtUpper
+                } else {
+                    BoundState::Free
+                }
+            })
+            .collect();
+        Ok(OutputErrorFit {
+            std_err: covariance
+                .diagonal()
+                .iter()
+                .map(|v| v.max(0.0).sqrt())
+                .collect(),
+            covariance,
+            theta,
+            initial,
+            noise_std,
+            cost: e.norm_squared(),
+            residuals: rows,
+            evaluations,
+            status,
+            bound_state,
+            correlation_lags: lags,
+            seconds: clock.elapsed().as_secs_f64(),
+        })
+    }
+}
+
+/// Residual standard deviation per channel, with the degrees of freedom shared out in
+/// proportion to the channel's share of the residuals.
+fn channel_std(raw: &[Vec<Vec<f64>>], rows: usize, unknowns: usize) -> Vec<f64> {
+    let nch = raw.first().map_or(0, Vec::len);
+    let dof_scale = rows as f64 / (rows - unknowns).max(1) as f64;
+    (0..nch)
+        .map(|c| {
+            let (ss, n) = raw.iter().fold((0.0, 0usize), |(ss, n), per| {
+                (
+                    ss + per[c].iter().map(|x| x * x).sum::<f64>(),
+                    n + per[c].len(),
+                )
+            });
+            (ss / n.max(1) as f64 * dof_scale).sqrt()
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn transforms_round_trip_and_stay_inside() {
+        for t in [
+            Transform::Free,
+            Transform::Both(-1.0, 3.0),
+            Transform::Lower(0.5),
+            Transform::Upper(-2.0),
+        ] {
+            for x in [0.7f64, 1.9, -0.3] {
+                let x = match t {
+                    Transform::Lower(lo) => lo + x.abs(),
+                    Transform::Upper(hi) => hi - x.abs(),
+                    _ => x,
+                };
+                let u = t.u(x);
+                approx::assert_relative_eq!(t.theta(u), x, max_relative = 1e-12);
+                let h = 1e-6;
+                let fd = (t.theta(u + h) - t.theta(u - h)) / (2.0 * h);
+                approx::assert_relative_eq!(t.dtheta_du(u), fd, max_relative = 1e-6);
+            }
+            for u in [-40.0, -1.0, 0.0, 2.0, 123.0] {
+                let x = t.theta(u);
+                match t {
+                    Transform::Both(lo, hi) => assert!((lo..=hi).contains(&x)),
+                    Transform::Lower(lo) => assert!(x >= lo),
+                    Transform::Upper(hi) => assert!(x <= hi),
+                    Transform::Free => {}
+                }
+            }
+        }
+    }
+}
