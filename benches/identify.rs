@@ -1,12 +1,13 @@
 //! Criterion benchmark: `identify` (condition → regress → solve → free-run validation) on a
 //! 1,000,000-row recording of the simulated Pioneer 3-DX (10 Hz, thesis excitation, encoder
-//! noise), with OLS and the default cut-off rule.
+//! noise), least squares (OLS) with the default cut-off rule — the thesis's estimator; the
+//! output-error and IV estimators are timed in `benches/estimators.rs`.
 //!
 //! Run: `cargo bench --bench identify`. The same work in Python (scipy butter + filtfilt,
 //! numpy gradient, lstsq) is `benches/identify_scipy.py`.
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use wheelid::identify::{IdentifySettings, identify};
+use wheelid::identify::{Estimator, IdentifySettings, identify};
 use wheelid::models::VwPd;
 use wheelid::robots::{Excitation, RobotProfile, SimSettings, simulate_recording};
 use wheelid::solvers::Ols;
@@ -25,17 +26,15 @@ fn bench_identify(c: &mut Criterion) {
         rec.write_csv(&path)
             .expect("writes the recording for the scipy comparison");
     }
+    let ls = IdentifySettings {
+        estimator: Estimator::Ls,
+        ..IdentifySettings::default()
+    };
     let mut group = c.benchmark_group("identify");
     group.sample_size(10);
     group.bench_function("vw-pd ols, 1e6 rows", |b| {
         b.iter(|| {
-            identify(
-                std::slice::from_ref(&rec),
-                &VwPd,
-                &Ols::default(),
-                &IdentifySettings::default(),
-            )
-            .expect("identifies")
+            identify(std::slice::from_ref(&rec), &VwPd, &Ols::default(), &ls).expect("identifies")
         })
     });
     group.finish();

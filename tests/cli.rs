@@ -46,6 +46,51 @@ fn json_has_the_documented_shape() {
 }
 
 #[test]
+fn compare_reports_every_estimator_and_the_shift_from_least_squares() {
+    // A 10 Hz multisine to 2 Hz: least squares is biased ~6 % on θ1, output error is not.
+    let dir = tempfile::tempdir().expect("tmp");
+    let csv = dir.path().join("ms.csv");
+    let csv = csv.to_str().expect("utf8");
+    let o = wheelid(&[
+        "simulate",
+        "--excitation",
+        "multisine",
+        "--duration",
+        "300",
+        "--seed",
+        "3",
+        "--out",
+        csv,
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = wheelid(&["identify", csv, "--compare", "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("stdout is JSON only");
+    assert_eq!(v["estimator"], "oe");
+    let names: Vec<&str> = v["estimates"]
+        .as_array()
+        .expect("estimates")
+        .iter()
+        .map(|e| e["estimator"].as_str().expect("name"))
+        .collect();
+    assert_eq!(names, ["ls", "iv", "oe"]);
+    let t1 = |i: usize| v["estimates"][i]["theta"][0].as_f64().expect("θ1");
+    let truth = 0.2604;
+    assert!((t1(0) - truth) / truth > 0.05, "ls θ1 {}", t1(0));
+    assert!(((t1(1) - truth) / truth).abs() < 0.01, "iv θ1 {}", t1(1));
+    assert!(((t1(2) - truth) / truth).abs() < 0.01, "oe θ1 {}", t1(2));
+    let shift = v["ls_shift_percent"][0].as_f64().expect("shift");
+    approx::assert_relative_eq!(shift, 100.0 * (t1(2) - t1(0)) / t1(0), max_relative = 1e-9);
+    // The text report warns of the bias.
+    let o = wheelid(&["identify", csv]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("least squares was biased"), "{text}");
+    let o = wheelid(&["identify", csv, "--estimator", "ls"]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(!text.contains("least squares was biased"), "{text}");
+}
+
+#[test]
 fn model_file_round_trips_and_plots_are_written() {
     let dir = tempfile::tempdir().expect("tmp");
     let out = dir.path().join("params.toml");

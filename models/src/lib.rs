@@ -12,8 +12,13 @@
 //! * [`WheelPd`] (`wheel-pd`): PD control on each wheel's velocity (§2.2, Khepera III);
 //! * [`VwPd`] (`vw-pd`): PD control on v and ω (Appendix A.3, Pioneer 3-DX).
 //!
-//! Both simulate their own (v, ω) response to (v_ref, ω_ref) ([`dynamics`]).
+//! Both simulate their own (v, ω) response to (v_ref, ω_ref) ([`dynamics`]), with analytic
+//! output sensitivities for output-error fitting.
+//!
+//! Extended models — the six θ plus physics that enters non-linearly, fitted by output error
+//! only: [`InputDelay`] (`delayed`, a dead time on the commands, [`delay`]).
 
+pub mod delay;
 pub mod dynamics;
 pub mod physical;
 pub mod regressor;
@@ -23,6 +28,7 @@ use wheelid_core::{
     RegressorModel, Result, Sensitivities, Simulation,
 };
 
+pub use delay::InputDelay;
 pub use physical::{Parameterization, VwPdConstants, VwPdMap, WheelPdConstants, WheelPdMap};
 
 macro_rules! six_theta_model {

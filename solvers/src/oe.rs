@@ -22,9 +22,11 @@
 //! θ = lb + (ub − lb)(1 + sin u)/2 (one side: θ = lb − 1 + √(u² + 1)), so the search is
 //! unconstrained in u and every trial θ is feasible.
 //!
-//! **Weights.** σ_c is the residual standard deviation of channel c: first at the starting θ,
-//! then once more at the first optimum, after which the problem is solved again (two passes;
-//! the second starts converged and costs a few evaluations).
+//! **Weights.** σ_c is the residual standard deviation of channel c, first at the starting θ;
+//! after each minimisation it is taken again at the optimum, and if a weight 1/σ_c moved by
+//! more than 10 % the problem is solved again from there (at most three passes; a repeat starts
+//! converged and costs a few evaluations). Any fixed weights give a consistent θ̂; these make
+//! it efficient when the channels' noise levels differ.
 //!
 //! **Uncertainty.** At θ̂ the weighted Jacobian J (rows time-major: sample k, then channel) and
 //! the weighted residuals e give the sandwich covariance
@@ -37,6 +39,7 @@
 //! 1994), so that coloured residuals (encoder quantization, unmodelled dynamics) widen the
 //! intervals instead of being ignored. P counts θ and the initial states.
 
+use std::cell::RefCell;
 use std::time::Instant;
 
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, TerminationReason};
@@ -165,7 +168,14 @@ struct Problem<'a, M: ?Sized> {
     /// Offsets of each recording's rows.
     offsets: Vec<usize>,
     rows: usize,
+    /// The last weighted Jacobian in (θ, x0) and the u it was taken at.
+    last_jacobian: RefCell<Option<(na::DVector<f64>, DMatrix<f64>)>>,
 }
+
+/// Most minimisations: a second (third) one only if the noise weights moved.
+const MAX_PASSES: usize = 3;
+/// Relative change of a channel weight 1/σ_c that calls for another pass.
+const WEIGHT_TOLERANCE: f64 = 0.1;
 
 /// Weighted residual of a failed or diverged simulation: large enough that Levenberg–Marquardt
 /// rejects the step and shrinks its trust region.
@@ -328,19 +338,14 @@ impl<M: DynamicModel + ?Sized> LeastSquaresProblem<f64, na::Dyn, na::Dyn> for Pr
     fn jacobian(&self) -> Option<na::DMatrix<f64>> {
         let jac = self.jacobian_theta(&self.u)?;
         let p = self.p();
-        let chain: Vec<f64> = self
-            .transform
-            .iter()
-            .zip(self.u.iter())
-            .map(|(t, &x)| t.dtheta_du(x))
+        let chain: Vec<f64> = (0..p)
+            .map(|j| self.transform[j].dtheta_du(self.u[j]))
             .collect();
-        Some(na::DMatrix::from_fn(jac.nrows(), jac.ncols(), |i, j| {
-            if j < p {
-                jac[(i, j)] * chain[j]
-            } else {
-                jac[(i, j)]
-            }
-        }))
+        let out = na::DMatrix::from_fn(jac.nrows(), jac.ncols(), |i, j| {
+            jac[(i, j)] * chain.get(j).copied().unwrap_or(1.0)
+        });
+        self.last_jacobian.replace(Some((self.u.clone(), jac)));
+        Some(out)
     }
 }
 
@@ -431,6 +436,7 @@ impl OutputError {
             u: na::DVector::from_vec(u0),
             offsets,
             rows,
+            last_jacobian: RefCell::new(None),
         };
         let lm = LevenbergMarquardt::new()
             .with_ftol(self.tolerance)
@@ -439,17 +445,26 @@ impl OutputError {
             .with_patience(self.patience);
         let mut evaluations = 0;
         let mut termination = TerminationReason::NoParameters;
-        for _pass in 0..2 {
-            let theta = problem.theta_of(&problem.u);
-            let raw = problem.raw_residuals(&theta, &problem.u).ok_or_else(|| {
-                SolveError::InvalidProblem(format!(
-                    "the model does not simulate (finitely) at θ = {theta:?}"
-                ))
-            })?;
-            problem.weight = channel_std(&raw, rows, unknowns)
+        let theta = problem.theta_of(&problem.u);
+        let mut raw = problem.raw_residuals(&theta, &problem.u).ok_or_else(|| {
+            SolveError::InvalidProblem(format!(
+                "the model does not simulate (finitely) at θ = {theta:?}"
+            ))
+        })?;
+        for pass in 0..MAX_PASSES {
+            let weight: Vec<f64> = channel_std(&raw, rows, unknowns)
                 .iter()
                 .map(|&sd| 1.0 / sd.max(1e-12))
                 .collect();
+            let settled = weight
+                .iter()
+                .zip(&problem.weight)
+                .all(|(a, b)| (a / b - 1.0).abs() < WEIGHT_TOLERANCE);
+            if pass > 0 && settled {
+                break;
+            }
+            problem.weight = weight;
+            problem.last_jacobian.replace(None);
             let (solved, report) = lm.minimize(problem);
             problem = solved;
             evaluations += report.number_of_evaluations;
@@ -464,22 +479,31 @@ impl OutputError {
                     "Levenberg–Marquardt stopped: {termination:?}"
                 )));
             }
+            let theta = problem.theta_of(&problem.u);
+            raw = problem.raw_residuals(&theta, &problem.u).ok_or_else(|| {
+                SolveError::Numerical("the fitted model does not simulate".into())
+            })?;
         }
         let status = match termination {
             TerminationReason::LostPatience => SolveStatus::IterationLimit,
             TerminationReason::NoImprovementPossible(_) => SolveStatus::AlmostSolved,
             _ => SolveStatus::Solved,
         };
-        // Uncertainty at θ̂ (module doc).
+        // Uncertainty at θ̂ (module doc), with the Jacobian of the last iteration if it was
+        // taken at θ̂.
         let u = problem.u.clone();
         let theta = problem.theta_of(&u);
-        let raw = problem
-            .raw_residuals(&theta, &u)
-            .ok_or_else(|| SolveError::Numerical("the fitted model does not simulate".into()))?;
         let noise_std = channel_std(&raw, rows, unknowns);
-        let jac = problem
-            .jacobian_theta(&u)
-            .ok_or_else(|| SolveError::Numerical("non-finite sensitivities at θ̂".into()))?;
+        let cached = problem
+            .last_jacobian
+            .take()
+            .and_then(|(at, j)| (at == u).then_some(j));
+        let jac = match cached {
+            Some(j) => j,
+            None => problem
+                .jacobian_theta(&u)
+                .ok_or_else(|| SolveError::Numerical("non-finite sensitivities at θ̂".into()))?,
+        };
         let mut e = DVector::zeros(rows);
         for (r, per) in raw.iter().enumerate() {
             for (c, ec) in per.iter().enumerate() {
