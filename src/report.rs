@@ -148,11 +148,11 @@ pub fn to_text(id: &Identification, truth: Option<&[f64]>) -> String {
     if id.estimator != crate::identify::Estimator::Ls && !moved.is_empty() {
         let _ = writeln!(
             s,
-            "warning: least squares was biased (errors in variables): {} moved by {} from the \
-             filtered regression; trust the {} answer and its intervals",
+            "warning: {} moved {} from least squares, beyond 3 σ: the filtered regression is \
+             biased here (noisy or coarsely sampled regressors), or the model misses physics \
+             that the two estimators weigh differently — check the free-run fit",
             id.estimator.name(),
             moved.join(", "),
-            id.estimator.name()
         );
         let _ = writeln!(s);
     }
