@@ -228,6 +228,16 @@ pub fn identify(
     if recordings.is_empty() {
         return Err(IdentifyError::Setting("no recording given".into()));
     }
+    if let Some(b) = &settings.bounds
+        && b.len() != model.params().len()
+    {
+        return Err(IdentifyError::Setting(format!(
+            "{} bounds given for the {} parameters of model `{}`",
+            b.len(),
+            model.params().len(),
+            model.name()
+        )));
+    }
     // 1. condition
     let uniform: Vec<(Recording, Option<f64>)> = recordings
         .iter()
@@ -463,8 +473,12 @@ fn steady_state(
     data: &[Conditioned],
     theta: &[f64],
 ) -> (Option<SteadyStateEstimate>, Option<SteadyStateEstimate>) {
-    let tau_v = (theta[0] / theta[3]).abs().max(0.5);
-    let tau_w = (theta[1] / theta[5]).abs().max(0.5);
+    // A time constant that is not finite (θ4 or θ6 at 0) or longer than a minute leaves no
+    // settled segment to use.
+    let tau = |a: f64, b: f64| Some((a / b).abs().max(0.5)).filter(|t| *t <= 60.0);
+    let (Some(tau_v), Some(tau_w)) = (tau(theta[0], theta[3]), tau(theta[1], theta[5])) else {
+        return (None, None);
+    };
     let mut acc = [(0.0, 0usize, 0.0), (0.0, 0usize, 0.0)];
     for c in data {
         let rec = &c.recording;

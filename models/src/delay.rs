@@ -87,8 +87,14 @@ impl DynamicModel for InputDelay {
         }
         let n = rec.len();
         // Merged grid: every sample instant, and every command switch t_j + τ_d inside.
-        let span = rec.t[n - 1] - rec.t[0];
-        let eps = 1e-9 * span.max(1e-9);
+        if n == 0 {
+            return Err(Error::InvalidSetting("the recording is empty".into()));
+        }
+        // Points closer than the rounding of the time stamps are one point (a switch landing on
+        // a sample instant); anything larger is a real sub-interval, however short, so that
+        // finite differences in τ_d of 1e-8 s still see the switch move.
+        let tmax = rec.t.iter().fold(0.0f64, |a, t| a.max(t.abs()));
+        let eps = 64.0 * f64::EPSILON * tmax.max(1.0);
         let mut grid: Vec<f64> = rec.t.clone();
         grid.extend(
             rec.t
@@ -98,8 +104,8 @@ impl DynamicModel for InputDelay {
         );
         grid.sort_by(f64::total_cmp);
         grid.dedup_by(|a, b| (*a - *b).abs() <= eps);
-        // Sample instants must survive the merge exactly (a switch within eps of one is dropped
-        // in its favour, as dedup keeps the first of equal runs only if it is the sample).
+        // Sample instants must come out exactly: a switch within eps of t_k (dedup may have
+        // kept either) is replaced by t_k itself.
         let mut merged_t = Vec::with_capacity(grid.len());
         let mut index = Vec::with_capacity(n); // position of each t_k in the merged grid
         let mut k = 0;

@@ -93,7 +93,7 @@ pub fn check_theta(theta: &[f64]) -> Result<[f64; 6]> {
 /// for window averages, the mean over [t_{k−1}, t_k] (the first sample is the initial state).
 ///
 /// # Errors
-/// [`Error::InvalidSetting`] for a bad θ or initial state.
+/// [`Error::InvalidSetting`] for a bad θ or initial state, or an empty recording.
 pub fn simulate(theta: &[f64], rec: &Recording, initial: &[f64]) -> Result<[Vec<f64>; 2]> {
     let th = check_theta(theta)?;
     let &[v0, w0] = initial else {
@@ -103,6 +103,9 @@ pub fn simulate(theta: &[f64], rec: &Recording, initial: &[f64]) -> Result<[Vec<
         )));
     };
     let n = rec.len();
+    if n == 0 {
+        return Err(Error::InvalidSetting("the recording is empty".into()));
+    }
     let hold = rec.command_hold();
     let avg = rec.velocity_sampling() == VelocitySampling::WindowAverage;
     let mut v_out = Vec::with_capacity(n);
@@ -191,6 +194,9 @@ pub fn simulate_with_sensitivities(
         )));
     };
     let n = rec.len();
+    if n == 0 {
+        return Err(Error::InvalidSetting("the recording is empty".into()));
+    }
     let hold = rec.command_hold();
     let avg = rec.velocity_sampling() == VelocitySampling::WindowAverage;
     let h_max = substep(&th);

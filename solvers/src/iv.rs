@@ -101,6 +101,9 @@ impl InstrumentalVariables {
                 model.name()
             )));
         }
+        if data.is_empty() {
+            return Err(SolveError::InvalidProblem("no recording".into()));
+        }
         let invalid = |e: wheelid_core::Error| SolveError::InvalidProblem(e.to_string());
         let per_file = data
             .iter()

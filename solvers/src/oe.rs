@@ -28,16 +28,18 @@
 //! converged and costs a few evaluations). Any fixed weights give a consistent θ̂; these make
 //! it efficient when the channels' noise levels differ.
 //!
-//! **Uncertainty.** At θ̂ the weighted Jacobian J (rows time-major: sample k, then channel) and
-//! the weighted residuals e give the sandwich covariance
+//! **Uncertainty.** At θ̂ the weighted Jacobian J (rows time-major: sample k, then channel c)
+//! and the weighted residuals e give the sandwich covariance
 //!
 //! ```text
-//! Cov = (JᵀJ)⁻¹ (Σ_l w_l Σ_t g_t g_{t+l}ᵀ) (JᵀJ)⁻¹ · N/(N − P),   g_t = J[t,:]ᵀ e_t,
+//! Cov = (JᵀJ)⁻¹ (Σ_r Σ_l w_l Σ_k G_k G_{k+l}ᵀ + transposes) (JᵀJ)⁻¹ · N/(N − P),
+//! G_k = Σ_c J[(k, c), :]ᵀ e_(k, c),
 //! ```
 //!
-//! with Bartlett weights w_l = 1 − l/(L + 1) over L = 4 (n/100)^{2/9} samples (Newey & West
-//! 1994), so that coloured residuals (encoder quantization, unmodelled dynamics) widen the
-//! intervals instead of being ignored. P counts θ and the initial states.
+//! summed over each recording r separately, with Bartlett weights w_l = 1 − l/(L + 1) over
+//! L = ⌊4 (n/100)^{2/9}⌋ instants (Newey & West 1994), so that coloured residuals (encoder
+//! quantization, unmodelled dynamics) widen the intervals instead of being ignored. P counts θ
+//! and the initial states; a parameter pinned on a bound is left out (its standard error is 0).
 
 use std::cell::RefCell;
 use std::time::Instant;
@@ -83,13 +85,14 @@ impl Default for OutputError {
 pub struct OutputErrorFit {
     /// θ̂, one per model parameter.
     pub theta: Vec<f64>,
-    /// Standard errors of θ̂ (sandwich covariance, see the module doc).
+    /// Standard errors of θ̂ (sandwich covariance, see the module doc); 0 for a parameter
+    /// pinned on a bound.
     pub std_err: Vec<f64>,
     /// Covariance of θ̂, p × p (the θ block of the full covariance).
     pub covariance: DMatrix<f64>,
     /// Initial state per recording, one value per channel.
     pub initial: Vec<Vec<f64>>,
-    /// Residual standard deviation per channel, in the channel's unit (the weights' σ_c).
+    /// Residual standard deviation per channel at θ̂, in the channel's unit.
     pub noise_std: Vec<f64>,
     /// Weighted cost Σ e²/σ² at θ̂ over all residuals.
     pub cost: f64,
@@ -139,6 +142,23 @@ impl Transform {
             Self::Both(lo, hi) => (hi - lo) * u.cos() / 2.0,
             Self::Lower(_) => u / (u * u + 1.0).sqrt(),
             Self::Upper(_) => -u / (u * u + 1.0).sqrt(),
+        }
+    }
+    /// Whether u puts θ on a bound: where the transform is flat (dθ/du ≈ 0), θ is within
+    /// ~1e-8 of the bound's scale and the data no longer move it.
+    fn bound_state(self, u: f64) -> BoundState {
+        match self {
+            Self::Free => BoundState::Free,
+            Self::Both(..) if u.cos().abs() < 1e-4 => {
+                if u.sin() < 0.0 {
+                    BoundState::AtLower
+                } else {
+                    BoundState::AtUpper
+                }
+            }
+            Self::Lower(_) if u.abs() < 1e-4 => BoundState::AtLower,
+            Self::Upper(_) if u.abs() < 1e-4 => BoundState::AtUpper,
+            _ => BoundState::Free,
         }
     }
     /// u for θ; θ is first moved a hair inside the bounds so that the derivative is not 0.
@@ -384,6 +404,13 @@ impl OutputError {
         if recordings.is_empty() {
             return Err(SolveError::InvalidProblem("no recording".into()));
         }
+        if let Some(r) = recordings.iter().find(|r| r.len() < 2) {
+            return Err(SolveError::InvalidProblem(format!(
+                "{}: {} samples; output error needs at least 2",
+                r.source.display(),
+                r.len()
+            )));
+        }
         let bounds = match &self.bounds {
             Some(b) if b.len() != p => {
                 return Err(SolveError::InvalidProblem(format!(
@@ -524,33 +551,36 @@ impl OutputError {
                 }
             }
         }
-        let name_refs: Vec<&str> = names.iter().map(String::as_str).collect();
+        // Parameters pinned on a bound (decided in u, where the transform is flat) take no part
+        // in the covariance: their columns are dropped and their standard error is 0.
+        let bound_state: Vec<BoundState> = problem
+            .transform
+            .iter()
+            .zip(u.iter())
+            .map(|(t, &x)| t.bound_state(x))
+            .collect();
+        let keep: Vec<usize> = (0..jac.ncols())
+            .filter(|&j| j >= p || bound_state[j] == BoundState::Free)
+            .collect();
+        let jac_free = jac.select_columns(keep.iter());
+        let name_refs: Vec<&str> = keep.iter().map(|&j| names[j].as_str()).collect();
         let lp = LinearProblem {
-            x: &jac,
+            x: &jac_free,
             y: &e,
             names: &name_refs,
             bounds: None,
-            correlation_lags: lags * s,
+            correlation_lags: 0,
         };
         let d = ols::decompose(&lp, 1e-12)?;
-        let full = ols::covariance(&d, &e, lp.correlation_lags);
-        let covariance = full.view((0, 0), (p, p)).into_owned();
+        let full = sandwich(&d, &jac_free, &e, &problem.offsets, recordings, s, lags);
+        let mut covariance = DMatrix::zeros(p, p);
+        for (a, &i) in keep.iter().enumerate().filter(|(_, i)| **i < p) {
+            for (b, &j) in keep.iter().enumerate().filter(|(_, j)| **j < p) {
+                covariance[(i, j)] = full[(a, b)];
+            }
+        }
         let initial = (0..recordings.len())
             .map(|r| problem.initial_of(&u, r))
-            .collect();
-        let bound_state = theta
-            .iter()
-            .zip(&bounds)
-            .map(|(&x, &(lo, hi))| {
-                let tol = 1e-9 * (1.0 + x.abs());
-                if x - lo <= tol {
-                    BoundState::AtLower
-                } else if hi - x <= tol {
-                    BoundState::AtUpper
-                } else {
-                    BoundState::Free
-                }
-            })
             .collect();
         Ok(OutputErrorFit {
             std_err: covariance
@@ -571,6 +601,50 @@ impl OutputError {
             seconds: clock.elapsed().as_secs_f64(),
         })
     }
+}
+
+/// The sandwich covariance of the module doc: bread from the SVD of the weighted Jacobian
+/// (J = U Σ Vᵀ D with D its column scaling), meat from the per-instant scores
+/// G_k = Σ_c J[(k, c), :]ᵀ e_(k, c) of each recording with Bartlett weights over `lags`
+/// instants (never across recordings), scaled by N/(N − P).
+fn sandwich(
+    d: &ols::Decomposition,
+    jac: &DMatrix<f64>,
+    e: &DVector<f64>,
+    offsets: &[usize],
+    recordings: &[Recording],
+    nch: usize,
+    lags: usize,
+) -> DMatrix<f64> {
+    let (rows, k) = jac.shape();
+    // H⁻¹ = D⁻¹ V Σ⁻² Vᵀ D⁻¹.
+    let mut a = d.v_t.transpose();
+    for (j, mut c) in a.column_iter_mut().enumerate() {
+        c /= d.sv[j] * d.sv[j];
+    }
+    let mut h_inv = a * &d.v_t;
+    for i in 0..k {
+        for j in 0..k {
+            h_inv[(i, j)] /= d.scales[i] * d.scales[j];
+        }
+    }
+    let mut meat = DMatrix::zeros(k, k);
+    for (rec, &off) in recordings.iter().zip(offsets) {
+        let n = rec.len();
+        let g = DMatrix::from_fn(n, k, |t, j| {
+            (0..nch)
+                .map(|c| jac[(off + t * nch + c, j)] * e[off + t * nch + c])
+                .sum::<f64>()
+        });
+        meat += g.transpose() * &g;
+        for l in 1..=lags.min(n.saturating_sub(1)) {
+            let w = 1.0 - l as f64 / (lags + 1) as f64;
+            let c = g.rows(0, n - l).transpose() * g.rows(l, n - l);
+            meat += (&c + c.transpose()) * w;
+        }
+    }
+    let dof = rows as f64 / (rows - k).max(1) as f64;
+    &h_inv * meat * &h_inv * dof
 }
 
 /// Residual standard deviation per channel, with the degrees of freedom shared out in
@@ -614,6 +688,23 @@ mod tests {
                 let h = 1e-6;
                 let fd = (t.theta(u + h) - t.theta(u - h)) / (2.0 * h);
                 approx::assert_relative_eq!(t.dtheta_du(u), fd, max_relative = 1e-6);
+            }
+            // On a bound the transform is flat and the state says so; inside it does not.
+            match t {
+                Transform::Both(lo, hi) => {
+                    assert_eq!(t.bound_state(t.u(hi)), BoundState::AtUpper);
+                    assert_eq!(t.bound_state(t.u(lo)), BoundState::AtLower);
+                    assert_eq!(t.bound_state(t.u(0.5 * (lo + hi))), BoundState::Free);
+                }
+                Transform::Lower(lo) => {
+                    assert_eq!(t.bound_state(t.u(lo)), BoundState::AtLower);
+                    assert_eq!(t.bound_state(t.u(lo + 1e-3)), BoundState::Free);
+                }
+                Transform::Upper(hi) => {
+                    assert_eq!(t.bound_state(t.u(hi)), BoundState::AtUpper);
+                    assert_eq!(t.bound_state(t.u(hi - 1e-3)), BoundState::Free);
+                }
+                Transform::Free => assert_eq!(t.bound_state(0.0), BoundState::Free),
             }
             for u in [-40.0, -1.0, 0.0, 2.0, 123.0] {
                 let x = t.theta(u);
