@@ -13,6 +13,7 @@ pub mod error;
 pub mod metrics;
 pub mod model;
 pub mod recording;
+pub mod residual;
 pub mod signal;
 pub mod solver;
 
