@@ -10,8 +10,9 @@
 //! inside the sample windows), so the simulation runs on the merged grid {t_k} ∪ {t_j + τ_d}
 //! and maps back: instant outputs are read at t_k, window averages are the length-weighted
 //! means of the sub-window averages — exact for any τ_d, not rounded to whole samples.
-//! Before the first sample the command is the first one (the robot was commanded so before
-//! recording); τ_d < 0 (a lead) is accepted so that finite differences at τ_d = 0 exist.
+//! Before the first sample the command is the one that holds the initial state in steady state
+//! (zero for a robot at rest, as the simulator's); τ_d < 0 (a lead) is accepted so that finite
+//! differences at τ_d = 0 exist.
 
 use wheelid_core::{
     ChannelInfo, CommandHold, DynamicModel, Error, ParamInfo, Recording, Result, Simulation,
@@ -35,17 +36,81 @@ pub static PARAMS: [ParamInfo; 7] = [
     },
 ];
 
+/// The command that holds (v0, ω0) in steady state under eq. 2.19:
+/// (θ4 v0 − θ3 ω0², θ5 v0 ω0 + θ6 ω0); zero for a robot at rest.
+pub(crate) fn holding_command(theta: &[f64], initial: &[f64]) -> (f64, f64) {
+    match (theta, initial) {
+        ([_, _, t3, t4, t5, t6, ..], [v0, w0, ..]) => {
+            (t4 * v0 - t3 * w0 * w0, t5 * v0 * w0 + t6 * w0)
+        }
+        _ => (0.0, 0.0),
+    }
+}
+
+/// The sample instants merged with the command switches t_j + `delay` and the `extra` instants
+/// that fall inside the recording; returns the merged times and the position of each t_k in
+/// them.
+///
+/// Points closer than the rounding of the time stamps are one point (a switch landing on a
+/// sample instant); anything larger is a real sub-interval, however short, so that finite
+/// differences in τ_d of 1e-8 s still see the switch move.
+///
+/// # Errors
+/// [`Error::InvalidSetting`] for an empty recording or time stamps too close to merge.
+pub(crate) fn merged_grid(
+    rec: &Recording,
+    delay: f64,
+    extra: &[f64],
+) -> Result<(Vec<f64>, Vec<usize>)> {
+    let n = rec.len();
+    if n == 0 {
+        return Err(Error::InvalidSetting("the recording is empty".into()));
+    }
+    let tmax = rec.t.iter().fold(0.0f64, |a, t| a.max(t.abs()));
+    let eps = 64.0 * f64::EPSILON * tmax.max(1.0);
+    let mut grid: Vec<f64> = rec.t.clone();
+    grid.extend(
+        rec.t
+            .iter()
+            .map(|&t| t + delay)
+            .chain(extra.iter().copied())
+            .filter(|&x| x > rec.t[0] && x < rec.t[n - 1]),
+    );
+    grid.sort_by(f64::total_cmp);
+    grid.dedup_by(|a, b| (*a - *b).abs() <= eps);
+    // Sample instants must come out exactly: a switch within eps of t_k (dedup may have kept
+    // either) is replaced by t_k itself.
+    let mut merged_t = Vec::with_capacity(grid.len());
+    let mut index = Vec::with_capacity(n);
+    let mut k = 0;
+    for &g in &grid {
+        if k < n && (g - rec.t[k]).abs() <= eps {
+            index.push(merged_t.len());
+            merged_t.push(rec.t[k]);
+            k += 1;
+        } else {
+            merged_t.push(g);
+        }
+    }
+    if index.len() != n {
+        return Err(Error::InvalidSetting(
+            "recording times are too close together to merge with the delay grid".into(),
+        ));
+    }
+    Ok((merged_t, index))
+}
+
 /// Eq. 2.19 with an input dead time τ_d = θ7 [s] (`delayed`).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct InputDelay;
 
 impl InputDelay {
-    /// The command held at time `tau` (staircase or linear as the recording says; clamped to
-    /// the first and last samples).
-    fn command_at(rec: &Recording, tau: f64) -> (f64, f64) {
+    /// The command held at time `tau` (staircase or linear as the recording says); before the
+    /// first sample it is `before`, after the last the last one.
+    pub(crate) fn command_at(rec: &Recording, tau: f64, before: (f64, f64)) -> (f64, f64) {
         let t = &rec.t;
-        if tau <= t[0] {
-            return (rec.v_ref[0], rec.w_ref[0]);
+        if tau < t[0] {
+            return before;
         }
         let n = t.len();
         if tau >= t[n - 1] {
@@ -86,53 +151,18 @@ impl DynamicModel for InputDelay {
             )));
         }
         let n = rec.len();
-        // Merged grid: every sample instant, and every command switch t_j + τ_d inside.
-        if n == 0 {
-            return Err(Error::InvalidSetting("the recording is empty".into()));
-        }
-        // Points closer than the rounding of the time stamps are one point (a switch landing on
-        // a sample instant); anything larger is a real sub-interval, however short, so that
-        // finite differences in τ_d of 1e-8 s still see the switch move.
-        let tmax = rec.t.iter().fold(0.0f64, |a, t| a.max(t.abs()));
-        let eps = 64.0 * f64::EPSILON * tmax.max(1.0);
-        let mut grid: Vec<f64> = rec.t.clone();
-        grid.extend(
-            rec.t
-                .iter()
-                .map(|&t| t + delay)
-                .filter(|&x| x > rec.t[0] && x < rec.t[n - 1]),
-        );
-        grid.sort_by(f64::total_cmp);
-        grid.dedup_by(|a, b| (*a - *b).abs() <= eps);
-        // Sample instants must come out exactly: a switch within eps of t_k (dedup may have
-        // kept either) is replaced by t_k itself.
-        let mut merged_t = Vec::with_capacity(grid.len());
-        let mut index = Vec::with_capacity(n); // position of each t_k in the merged grid
-        let mut k = 0;
-        for &g in &grid {
-            if k < n && (g - rec.t[k]).abs() <= eps {
-                index.push(merged_t.len());
-                merged_t.push(rec.t[k]);
-                k += 1;
-            } else {
-                merged_t.push(g);
-            }
-        }
-        if index.len() != n {
-            return Err(Error::InvalidSetting(
-                "recording times are too close together to merge with the delay grid".into(),
-            ));
-        }
+        let (merged_t, index) = merged_grid(rec, delay, &[])?;
         // A held command is read at the middle of its sub-interval, so that rounding of
         // t_j + τ_d − τ_d cannot pick the neighbouring sample.
         let zoh = rec.command_hold() == CommandHold::Zoh;
+        let hold = holding_command(th, initial);
         let (vr, wr): (Vec<f64>, Vec<f64>) = (0..merged_t.len())
             .map(|i| {
                 let t = match merged_t.get(i + 1) {
                     Some(next) if zoh => 0.5 * (merged_t[i] + next),
                     _ => merged_t[i],
                 };
-                Self::command_at(rec, t - delay)
+                Self::command_at(rec, t - delay, hold)
             })
             .unzip();
         let m = merged_t.len();
@@ -212,8 +242,10 @@ mod tests {
             let mut shifted = rec.clone();
             shifted.v_ref.rotate_right(1);
             shifted.w_ref.rotate_right(1);
-            shifted.v_ref[0] = rec.v_ref[0];
-            shifted.w_ref[0] = rec.w_ref[0];
+            // Before the recording, the command that holds x0 in steady state.
+            let hold = holding_command(&THETA, &x0);
+            shifted.v_ref[0] = hold.0;
+            shifted.w_ref[0] = hold.1;
             let want = dynamics::simulate(&THETA, &shifted, &x0).expect("sim");
             th7[6] = 0.1;
             let d1 = InputDelay.simulate(&th7, &rec, &x0).expect("sim");

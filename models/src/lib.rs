@@ -16,10 +16,12 @@
 //! output sensitivities for output-error fitting.
 //!
 //! Extended models — the six θ plus physics that enters non-linearly, fitted by output error
-//! only: [`InputDelay`] (`delayed`, a dead time on the commands, [`delay`]).
+//! only: [`InputDelay`] (`delayed`, a dead time on the commands, [`delay`]) and [`Extended`]
+//! (any set of the diagnosis's [`Candidate`] physics, [`extended`]).
 
 pub mod delay;
 pub mod dynamics;
+pub mod extended;
 pub mod physical;
 pub mod regressor;
 
@@ -29,6 +31,7 @@ use wheelid_core::{
 };
 
 pub use delay::InputDelay;
+pub use extended::{Candidate, Extended};
 pub use physical::{Parameterization, VwPdConstants, VwPdMap, WheelPdConstants, WheelPdMap};
 
 macro_rules! six_theta_model {

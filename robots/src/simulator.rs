@@ -245,15 +245,21 @@ impl SimRobot {
             target[0] = target[0].clamp(-s.v_max, s.v_max);
             target[1] = target[1].clamp(-s.w_max, s.w_max);
         }
-        match self.effects.acceleration_limit {
+        // The rate-limited setpoint slews over the sub-step; the sub-step is driven by its mean
+        // (the ramp's midpoint value), second-order accurate like the RK4 around it.
+        let [mut uv, mut uw] = match self.effects.acceleration_limit {
             Some(l) => {
+                let before = self.setpoint;
                 for (i, a) in [l.v_accel_max, l.w_accel_max].into_iter().enumerate() {
                     self.setpoint[i] += (target[i] - self.setpoint[i]).clamp(-a * h, a * h);
                 }
+                [0, 1].map(|i| 0.5 * (before[i] + self.setpoint[i]))
             }
-            None => self.setpoint = target,
-        }
-        let [mut uv, mut uw] = self.setpoint;
+            None => {
+                self.setpoint = target;
+                target
+            }
+        };
         if let Some(a) = self.effects.wheel_asymmetry {
             let d = self.profile.track;
             let (gr, gl) = (2.0 * a.ratio / (1.0 + a.ratio), 2.0 / (1.0 + a.ratio));
