@@ -86,15 +86,18 @@ pub fn check_theta(theta: &[f64]) -> Result<[f64; 6]> {
     Ok(th)
 }
 
-/// Free-run simulation of (v, ω) on the recording's time base from its commands, starting at
-/// `initial = [v0, ω0]`.
-///
-/// Output samples follow the recording's velocity sampling: instantaneous values at t_k, or,
-/// for window averages, the mean over [t_{k−1}, t_k] (the first sample is the initial state).
-///
-/// # Errors
-/// [`Error::InvalidSetting`] for a bad θ or initial state, or an empty recording.
-pub fn simulate(theta: &[f64], rec: &Recording, initial: &[f64]) -> Result<[Vec<f64>; 2]> {
+/// What both simulations check and read first.
+struct Setup {
+    th: [f64; 6],
+    v0: f64,
+    w0: f64,
+    n: usize,
+    hold: CommandHold,
+    avg: bool,
+}
+
+/// Checks θ, the initial state and the recording, and reads how it holds and samples.
+fn setup(theta: &[f64], rec: &Recording, initial: &[f64]) -> Result<Setup> {
     let th = check_theta(theta)?;
     let &[v0, w0] = initial else {
         return Err(Error::InvalidSetting(format!(
@@ -106,8 +109,33 @@ pub fn simulate(theta: &[f64], rec: &Recording, initial: &[f64]) -> Result<[Vec<
     if n == 0 {
         return Err(Error::InvalidSetting("the recording is empty".into()));
     }
-    let hold = rec.command_hold();
-    let avg = rec.velocity_sampling() == VelocitySampling::WindowAverage;
+    Ok(Setup {
+        th,
+        v0,
+        w0,
+        n,
+        hold: rec.command_hold(),
+        avg: rec.velocity_sampling() == VelocitySampling::WindowAverage,
+    })
+}
+
+/// Free-run simulation of (v, ω) on the recording's time base from its commands, starting at
+/// `initial = [v0, ω0]`.
+///
+/// Output samples follow the recording's velocity sampling: instantaneous values at t_k, or,
+/// for window averages, the mean over [t_{k−1}, t_k] (the first sample is the initial state).
+///
+/// # Errors
+/// [`Error::InvalidSetting`] for a bad θ or initial state, or an empty recording.
+pub fn simulate(theta: &[f64], rec: &Recording, initial: &[f64]) -> Result<[Vec<f64>; 2]> {
+    let Setup {
+        th,
+        v0,
+        w0,
+        n,
+        hold,
+        avg,
+    } = setup(theta, rec, initial)?;
     let mut v_out = Vec::with_capacity(n);
     let mut w_out = Vec::with_capacity(n);
     let h_max = substep(&th);
@@ -186,19 +214,14 @@ pub fn simulate_with_sensitivities(
     rec: &Recording,
     initial: &[f64],
 ) -> Result<([Vec<f64>; 2], Sensitivities)> {
-    let th = check_theta(theta)?;
-    let &[v0, w0] = initial else {
-        return Err(Error::InvalidSetting(format!(
-            "initial state must be [v, ω], got {} values",
-            initial.len()
-        )));
-    };
-    let n = rec.len();
-    if n == 0 {
-        return Err(Error::InvalidSetting("the recording is empty".into()));
-    }
-    let hold = rec.command_hold();
-    let avg = rec.velocity_sampling() == VelocitySampling::WindowAverage;
+    let Setup {
+        th,
+        v0,
+        w0,
+        n,
+        hold,
+        avg,
+    } = setup(theta, rec, initial)?;
     let h_max = substep(&th);
     let mut z = [0.0; NZ];
     z[0] = v0;
