@@ -42,20 +42,55 @@ pub fn accel(theta: &[f64; 6], v: f64, w: f64, v_ref: f64, w_ref: f64) -> (f64, 
     )
 }
 
-/// One RK4 step of length `h` for the state (v, ω, ∫v, ∫ω) with commands varying linearly from
-/// `u0` to `u1` over the step; the integrals give window averages to the same order.
+/// One classical RK4 step of ẋ = f(x, u) of length `h`, with the command varying linearly from
+/// `u0` to `u1` over the step (its midpoint for the middle stages); adds ∫x over the step, by the
+/// same stages, to `q` — window averages to the same order as the state.
 #[inline]
-fn rk4(theta: &[f64; 6], s: [f64; 4], u0: (f64, f64), u1: (f64, f64), h: f64) -> [f64; 4] {
+pub(crate) fn rk4_step<const N: usize>(
+    f: impl Fn(&[f64; N], (f64, f64)) -> [f64; N],
+    x: &mut [f64; N],
+    q: &mut [f64; N],
+    u0: (f64, f64),
+    u1: (f64, f64),
+    h: f64,
+) {
     let um = ((u0.0 + u1.0) * 0.5, (u0.1 + u1.1) * 0.5);
-    let f = |v: f64, w: f64, u: (f64, f64)| {
-        let (dv, dw) = accel(theta, v, w, u.0, u.1);
-        [dv, dw, v, w]
+    let k1 = f(x, u0);
+    let x2: [f64; N] = std::array::from_fn(|i| x[i] + 0.5 * h * k1[i]);
+    let k2 = f(&x2, um);
+    let x3: [f64; N] = std::array::from_fn(|i| x[i] + 0.5 * h * k2[i]);
+    let k3 = f(&x3, um);
+    let x4: [f64; N] = std::array::from_fn(|i| x[i] + h * k3[i]);
+    let k4 = f(&x4, u1);
+    for i in 0..N {
+        q[i] += h / 6.0 * (x[i] + 2.0 * x2[i] + 2.0 * x3[i] + x4[i]);
+        x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+    }
+}
+
+/// Calls `step(u0, u1, h)` for the equal sub-steps (at most `h_max` long) of the interval
+/// [t_{k−1}, t_k], with the command held or linearly interpolated as `hold` says; returns the
+/// interval's length.
+fn for_each_substep(
+    rec: &Recording,
+    k: usize,
+    hold: CommandHold,
+    h_max: f64,
+    mut step: impl FnMut((f64, f64), (f64, f64), f64),
+) -> f64 {
+    let span = rec.t[k] - rec.t[k - 1];
+    let m = (span / h_max).ceil().max(1.0) as usize;
+    let h = span / m as f64;
+    let ua = (rec.v_ref[k - 1], rec.w_ref[k - 1]);
+    let ub = match hold {
+        CommandHold::Zoh => ua,
+        CommandHold::Sampled => (rec.v_ref[k], rec.w_ref[k]),
     };
-    let k1 = f(s[0], s[1], u0);
-    let k2 = f(s[0] + 0.5 * h * k1[0], s[1] + 0.5 * h * k1[1], um);
-    let k3 = f(s[0] + 0.5 * h * k2[0], s[1] + 0.5 * h * k2[1], um);
-    let k4 = f(s[0] + h * k3[0], s[1] + h * k3[1], u1);
-    std::array::from_fn(|i| s[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]))
+    let at = |f: f64| (ua.0 + f * (ub.0 - ua.0), ua.1 + f * (ub.1 - ua.1));
+    for j in 0..m {
+        step(at(j as f64 / m as f64), at((j + 1) as f64 / m as f64), h);
+    }
+    span
 }
 
 /// Integration sub-step for θ: a tenth of the faster time constant (θ1/θ4, θ2/θ6), at most
@@ -139,34 +174,21 @@ pub fn simulate(theta: &[f64], rec: &Recording, initial: &[f64]) -> Result<[Vec<
     let mut v_out = Vec::with_capacity(n);
     let mut w_out = Vec::with_capacity(n);
     let h_max = substep(&th);
-    let mut s = [v0, w0, 0.0, 0.0];
+    let f = |x: &[f64; 2], u: (f64, f64)| {
+        let (dv, dw) = accel(&th, x[0], x[1], u.0, u.1);
+        [dv, dw]
+    };
+    let mut x = [v0, w0];
     v_out.push(v0);
     w_out.push(w0);
     for k in 1..n {
-        let span = rec.t[k] - rec.t[k - 1];
-        let m = (span / h_max).ceil().max(1.0) as usize;
-        let h = span / m as f64;
-        let ua = (rec.v_ref[k - 1], rec.w_ref[k - 1]);
-        let ub = match hold {
-            CommandHold::Zoh => ua,
-            CommandHold::Sampled => (rec.v_ref[k], rec.w_ref[k]),
-        };
-        s[2] = 0.0;
-        s[3] = 0.0;
-        for j in 0..m {
-            let f0 = j as f64 / m as f64;
-            let f1 = (j + 1) as f64 / m as f64;
-            let u0 = (ua.0 + f0 * (ub.0 - ua.0), ua.1 + f0 * (ub.1 - ua.1));
-            let u1 = (ua.0 + f1 * (ub.0 - ua.0), ua.1 + f1 * (ub.1 - ua.1));
-            s = rk4(&th, s, u0, u1, h);
-        }
-        if avg {
-            v_out.push(s[2] / span);
-            w_out.push(s[3] / span);
-        } else {
-            v_out.push(s[0]);
-            w_out.push(s[1]);
-        }
+        let mut q = [0.0; 2];
+        let span = for_each_substep(rec, k, hold, h_max, |u0, u1, h| {
+            rk4_step(f, &mut x, &mut q, u0, u1, h);
+        });
+        let y = if avg { q.map(|i| i / span) } else { x };
+        v_out.push(y[0]);
+        w_out.push(y[1]);
     }
     Ok([v_out, w_out])
 }
@@ -243,34 +265,12 @@ pub fn simulate_with_sensitivities(
         }
     };
     store(0, &z, 1.0, &mut y, &mut sens);
+    let f = |z: &[f64; NZ], u: (f64, f64)| augmented_rhs(&th, z, u);
     for k in 1..n {
-        let span = rec.t[k] - rec.t[k - 1];
-        let m = (span / h_max).ceil().max(1.0) as usize;
-        let h = span / m as f64;
-        let ua = (rec.v_ref[k - 1], rec.w_ref[k - 1]);
-        let ub = match hold {
-            CommandHold::Zoh => ua,
-            CommandHold::Sampled => (rec.v_ref[k], rec.w_ref[k]),
-        };
         let mut q = [0.0; NZ];
-        for j in 0..m {
-            let f0 = j as f64 / m as f64;
-            let f1 = (j + 1) as f64 / m as f64;
-            let u0 = (ua.0 + f0 * (ub.0 - ua.0), ua.1 + f0 * (ub.1 - ua.1));
-            let u1 = (ua.0 + f1 * (ub.0 - ua.0), ua.1 + f1 * (ub.1 - ua.1));
-            let um = ((u0.0 + u1.0) * 0.5, (u0.1 + u1.1) * 0.5);
-            let k1 = augmented_rhs(&th, &z, u0);
-            let z2: [f64; NZ] = std::array::from_fn(|i| z[i] + 0.5 * h * k1[i]);
-            let k2 = augmented_rhs(&th, &z2, um);
-            let z3: [f64; NZ] = std::array::from_fn(|i| z[i] + 0.5 * h * k2[i]);
-            let k3 = augmented_rhs(&th, &z3, um);
-            let z4: [f64; NZ] = std::array::from_fn(|i| z[i] + h * k3[i]);
-            let k4 = augmented_rhs(&th, &z4, u1);
-            for i in 0..NZ {
-                q[i] += h / 6.0 * (z[i] + 2.0 * z2[i] + 2.0 * z3[i] + z4[i]);
-                z[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
-            }
-        }
+        let span = for_each_substep(rec, k, hold, h_max, |u0, u1, h| {
+            rk4_step(f, &mut z, &mut q, u0, u1, h);
+        });
         if avg {
             store(k, &q, 1.0 / span, &mut y, &mut sens);
         } else {

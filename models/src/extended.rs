@@ -337,6 +337,7 @@ impl DynamicModel for Extended {
             } else {
                 InputDelay::command_at(rec, tb - ph.delay, hold)
             };
+            let rhs_at = |x: &[f64; 2], u: (f64, f64)| rhs(&th, x[0], x[1], [u.0, u.1]);
             let h_max = dynamics::substep(&th);
             let steps = (span / h_max).ceil().max(1.0) as usize;
             let h = span / steps as f64;
@@ -358,18 +359,7 @@ impl DynamicModel for Extended {
                 };
                 let u0 = shape(s_start, tau0);
                 let u1 = shape(s1, tau1);
-                let um = [0.5 * (u0[0] + u1[0]), 0.5 * (u0[1] + u1[1])];
-                let k1 = rhs(&th, s[0], s[1], u0);
-                let z2 = [s[0] + 0.5 * h * k1[0], s[1] + 0.5 * h * k1[1]];
-                let k2 = rhs(&th, z2[0], z2[1], um);
-                let z3 = [s[0] + 0.5 * h * k2[0], s[1] + 0.5 * h * k2[1]];
-                let k3 = rhs(&th, z3[0], z3[1], um);
-                let z4 = [s[0] + h * k3[0], s[1] + h * k3[1]];
-                let k4 = rhs(&th, z4[0], z4[1], u1);
-                for c in 0..2 {
-                    q[c] += h / 6.0 * (s[c] + 2.0 * z2[c] + 2.0 * z3[c] + z4[c]);
-                    s[c] += h / 6.0 * (k1[c] + 2.0 * k2[c] + 2.0 * k3[c] + k4[c]);
-                }
+                dynamics::rk4_step(rhs_at, &mut s, &mut q, (u0[0], u0[1]), (u1[0], u1[1]), h);
                 setpoint = s1;
             }
             for c in 0..2 {
