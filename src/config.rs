@@ -161,3 +161,60 @@ pub fn robot_profile(
         ),
     }
 }
+
+/// A diagnosis described in TOML (`wheelid diagnose --config FILE`); every key is optional and
+/// the command-line flags override it. Files are relative to the configuration's directory.
+///
+/// ```toml
+/// files = ["../shared/data/real/husky_drive_wetgrass/husky_wetgrass_seg1.csv"]
+/// model = "vw-pd"
+/// candidates = ["input_delay", "acceleration_limit", "velocity_saturation"]
+/// blocks = 5          # per recording; the 2nd, 4th, … are held out for validation
+/// alpha = 0.01        # family-wise level (Holm)
+/// max_lag_s = 2.0     # correlation lags tested
+/// min_improvement = 0.05
+/// max_effects = 3
+/// track_m = 0.555     # wheel track for wheel_asymmetry
+/// plot = "diagnosis"  # directory for the PNGs
+/// ```
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DiagnoseConfig {
+    /// Recording CSV files.
+    pub files: Vec<PathBuf>,
+    /// Model parameterization (`vw-pd`, `wheel-pd`).
+    pub model: Option<String>,
+    /// The candidate library searched (default: all).
+    pub candidates: Option<Vec<wheelid_models::Candidate>>,
+    /// Blocks per recording.
+    pub blocks: Option<usize>,
+    /// Family-wise level of the tests.
+    pub alpha: Option<f64>,
+    /// Largest correlation lag [s].
+    pub max_lag_s: Option<f64>,
+    /// Smallest relative drop of the validation cost that counts.
+    pub min_improvement: Option<f64>,
+    /// Most effects added.
+    pub max_effects: Option<usize>,
+    /// Wheel track [m].
+    pub track_m: Option<f64>,
+    /// Directory for the plots.
+    pub plot: Option<PathBuf>,
+}
+
+impl DiagnoseConfig {
+    /// The settings this configuration gives, over the defaults.
+    pub fn settings(&self) -> crate::diagnose::DiagnoseSettings {
+        let mut s = crate::diagnose::DiagnoseSettings::default();
+        if let Some(c) = &self.candidates {
+            s.candidates.clone_from(c);
+        }
+        s.blocks = self.blocks.unwrap_or(s.blocks);
+        s.alpha = self.alpha.unwrap_or(s.alpha);
+        s.max_lag_s = self.max_lag_s.unwrap_or(s.max_lag_s);
+        s.min_improvement = self.min_improvement.unwrap_or(s.min_improvement);
+        s.max_effects = self.max_effects.unwrap_or(s.max_effects);
+        s.track_m = self.track_m.or(s.track_m);
+        s
+    }
+}

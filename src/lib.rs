@@ -26,6 +26,7 @@
 //! ```
 
 pub mod config;
+pub mod diagnose;
 pub mod files;
 pub mod identify;
 pub mod plot;

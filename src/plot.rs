@@ -10,6 +10,7 @@ use anyhow::{Context, Result};
 use plotters::prelude::*;
 use plotters::style::FontStyle;
 
+use crate::diagnose::Diagnosis;
 use crate::identify::Identification;
 use wheelid_robots::TrackResult;
 
@@ -287,6 +288,231 @@ pub fn write_track_plots(r: &TrackResult, dir: &Path) -> Result<Vec<PathBuf>> {
                     .map(|(a, th)| (*a, th[i])),
                 BLUE.stroke_width(2),
             ))?;
+        }
+        root.present()?;
+    }
+    out.push(path);
+    Ok(out)
+}
+
+/// Writes the plots of a diagnosis into `dir` (created if needed) and returns the files:
+/// * `diagnosis_response_<file>.png`: measured vs nominal vs extended (final) free-run v and
+///   ω, validation blocks shaded;
+/// * `diagnosis_correlation.png`: residual–command cross-correlations of the nominal and the
+///   final model against lag, with their 99 % bounds (Ljung §16.6);
+/// * `diagnosis_location.png`: where the nominal misfit lives — residual RMS per operating
+///   region over the RMS everywhere, nominal vs final, per channel.
+///
+/// # Errors
+/// If the directory cannot be created or a PNG cannot be written.
+pub fn write_diagnosis_plots(d: &Diagnosis, dir: &Path) -> Result<Vec<PathBuf>> {
+    register_font();
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let mut out = Vec::new();
+    let labels = [("v [m/s]", "v"), ("ω [rad/s]", "ω")];
+    let shade = RGBColor(230, 230, 230);
+    for (i, s) in d.series.iter().enumerate() {
+        let path = dir.join(format!("diagnosis_response_{}.png", stem(&s.source, i)));
+        {
+            let root = BitMapBackend::new(&path, (1400, 800)).into_drawing_area();
+            root.fill(&WHITE)?;
+            let panels = root.split_evenly((2, 1));
+            for (ch, area) in panels.iter().enumerate() {
+                let step = (s.t.len() / MAX_POINTS).max(1);
+                let (y0, y1) = range(
+                    s.measured[ch]
+                        .iter()
+                        .chain(&s.nominal[ch])
+                        .chain(&s.extended[ch])
+                        .copied(),
+                );
+                let (t0, t1) = (s.t[0], s.t[s.t.len() - 1]);
+                let mut chart = ChartBuilder::on(area)
+                    .caption(
+                        format!(
+                            "{} — {}: measured, nominal, {} (grey: validation)",
+                            s.source.display(),
+                            labels[ch].1,
+                            d.final_stage.model
+                        ),
+                        ("sans-serif", 18),
+                    )
+                    .margin(10)
+                    .x_label_area_size(35)
+                    .y_label_area_size(60)
+                    .build_cartesian_2d(t0..t1, y0..y1)?;
+                chart
+                    .configure_mesh()
+                    .x_desc("t [s]")
+                    .y_desc(labels[ch].0)
+                    .draw()?;
+                // Validation blocks.
+                let mut k = 0;
+                while k < s.t.len() {
+                    if s.validation[k] {
+                        let start = k;
+                        while k < s.t.len() && s.validation[k] {
+                            k += 1;
+                        }
+                        chart.draw_series(std::iter::once(Rectangle::new(
+                            [(s.t[start], y0), (s.t[k - 1], y1)],
+                            shade.filled(),
+                        )))?;
+                    }
+                    k += 1;
+                }
+                let series: [(&[f64], RGBColor, u32, &str); 3] = [
+                    (&s.measured[ch], BLUE, 1, "measured"),
+                    (&s.nominal[ch], RGBColor(230, 120, 0), 1, "nominal"),
+                    (&s.extended[ch], RGBColor(200, 0, 0), 2, "extended"),
+                ];
+                for (y, color, width, name) in series {
+                    chart
+                        .draw_series(LineSeries::new(
+                            s.t.iter().zip(y).step_by(step).map(|(a, b)| (*a, *b)),
+                            color.stroke_width(width),
+                        ))?
+                        .label(name)
+                        .legend(move |(x, y)| {
+                            PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+                        });
+                }
+                chart
+                    .configure_series_labels()
+                    .background_style(WHITE.mix(0.8))
+                    .border_style(BLACK)
+                    .draw()?;
+            }
+            root.present()?;
+        }
+        out.push(path);
+    }
+    let path = dir.join("diagnosis_correlation.png");
+    {
+        let root = BitMapBackend::new(&path, (1400, 900)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let cells = root.split_evenly((2, 2));
+        let lag = d.location.max_lag as isize;
+        let dt = d.location.dt;
+        for ch in 0..2 {
+            for u in 0..2 {
+                let before = &d.location.channels[ch].independence[u];
+                let after = &d.final_location.channels[ch].independence[u];
+                let (y0, y1) = range(
+                    before
+                        .r
+                        .iter()
+                        .chain(&after.r)
+                        .copied()
+                        .chain([before.bound, -before.bound]),
+                );
+                let x = |i: usize| (i as isize - lag) as f64 * dt;
+                let (x0, x1) = (x(0), x(before.r.len().saturating_sub(1)).max(x(0) + dt));
+                let mut chart = ChartBuilder::on(&cells[2 * ch + u])
+                    .caption(
+                        format!(
+                            "{} residual vs {} (p = {:.1e} → {:.1e})",
+                            labels[ch].1,
+                            ["v_ref", "ω_ref"][u],
+                            before.p_value,
+                            after.p_value
+                        ),
+                        ("sans-serif", 18),
+                    )
+                    .margin(8)
+                    .x_label_area_size(35)
+                    .y_label_area_size(55)
+                    .build_cartesian_2d(x0..x1, y0..y1)?;
+                chart
+                    .configure_mesh()
+                    .x_desc("lag [s] (> 0: residual after command)")
+                    .y_desc("cross-correlation")
+                    .draw()?;
+                for (t, color, name) in [
+                    (before, RGBColor(230, 120, 0), "nominal"),
+                    (after, RGBColor(200, 0, 0), "final"),
+                ] {
+                    chart
+                        .draw_series(LineSeries::new(
+                            t.r.iter().enumerate().map(|(i, r)| (x(i), *r)),
+                            color.stroke_width(2),
+                        ))?
+                        .label(name)
+                        .legend(move |(a, b)| {
+                            PathElement::new(vec![(a, b), (a + 20, b)], color.stroke_width(2))
+                        });
+                    for b in [t.bound, -t.bound] {
+                        chart.draw_series(LineSeries::new(
+                            [(x0, b), (x1, b)],
+                            color.mix(0.6).stroke_width(1),
+                        ))?;
+                    }
+                }
+                chart
+                    .configure_series_labels()
+                    .background_style(WHITE.mix(0.8))
+                    .border_style(BLACK)
+                    .draw()?;
+            }
+        }
+        root.present()?;
+    }
+    out.push(path);
+    let path = dir.join("diagnosis_location.png");
+    {
+        let root = BitMapBackend::new(&path, (1400, 600)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let cells = root.split_evenly((1, 2));
+        for ch in 0..2 {
+            let before = &d.location.channels[ch].regions;
+            let after = &d.final_location.channels[ch].regions;
+            let names: Vec<String> = before.iter().map(|r| r.name.clone()).collect();
+            let after_of = |n: &str| {
+                after
+                    .iter()
+                    .find(|r| r.name == n)
+                    .map_or(0.0, |r| r.rms_ratio * d.final_location.channels[ch].rms)
+                    / d.location.channels[ch].rms.max(1e-300)
+            };
+            let top = before
+                .iter()
+                .map(|r| r.rms_ratio)
+                .chain(names.iter().map(|n| after_of(n)))
+                .fold(1.0f64, f64::max)
+                * 1.1;
+            let mut chart = ChartBuilder::on(&cells[ch])
+                .caption(
+                    format!(
+                        "{}: residual RMS by region / nominal RMS overall",
+                        labels[ch].1
+                    ),
+                    ("sans-serif", 18),
+                )
+                .margin(8)
+                .x_label_area_size(90)
+                .y_label_area_size(55)
+                .build_cartesian_2d(0.0..names.len() as f64, 0.0..top)?;
+            chart
+                .configure_mesh()
+                .disable_x_mesh()
+                .x_labels(names.len().max(1))
+                .x_label_formatter(&|x| {
+                    let i = x.floor() as usize;
+                    names.get(i).cloned().unwrap_or_default()
+                })
+                .y_desc("RMS ratio")
+                .draw()?;
+            for (i, r) in before.iter().enumerate() {
+                let x = i as f64;
+                chart.draw_series(std::iter::once(Rectangle::new(
+                    [(x + 0.1, 0.0), (x + 0.5, r.rms_ratio)],
+                    RGBColor(230, 120, 0).filled(),
+                )))?;
+                chart.draw_series(std::iter::once(Rectangle::new(
+                    [(x + 0.5, 0.0), (x + 0.9, after_of(&r.name))],
+                    RGBColor(200, 0, 0).filled(),
+                )))?;
+            }
         }
         root.present()?;
     }

@@ -5,6 +5,7 @@
 
 use serde_json::{Value, json};
 
+use crate::diagnose::Diagnosis;
 use crate::identify::Identification;
 use wheelid_robots::{RobotProfile, TrackResult, TrackSettings};
 
@@ -243,4 +244,146 @@ pub fn track_text(robot: &RobotProfile, s: &TrackSettings, r: &TrackResult) -> S
         r.summary.rms, r.summary.last, r.summary.max
     );
     o
+}
+
+/// Text report of a diagnosis, its six steps in order (fit, test, locate, name, model and
+/// accept, show).
+pub fn diagnosis_text(d: &Diagnosis) -> String {
+    use std::fmt::Write;
+    let mut s = String::new();
+    let fits = |c: &crate::diagnose::Channels| {
+        format!("v {:.1} %, ω {:.1} %", c.v.fit_percent, c.w.fit_percent)
+    };
+    let _ = writeln!(
+        s,
+        "1. Fit: nominal model (eq. 2.19) by output error on {:.0} s; {:.0} s in {} validation \
+         blocks held out (blocks 2, 4, … of {} per recording).",
+        d.split.training_s,
+        d.split.validation_s,
+        d.split.blocks / 2,
+        d.split.blocks
+    );
+    let names = ["θ1", "θ2", "θ3", "θ4", "θ5", "θ6"];
+    let _ = writeln!(
+        s,
+        "   θ = {}",
+        d.nominal
+            .theta
+            .iter()
+            .zip(&d.nominal.std_err)
+            .zip(names)
+            .map(|((t, e), n)| format!("{n} {t:.4}±{e:.4}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    let _ = writeln!(
+        s,
+        "2. Test (validation blocks): free-run fit {}.",
+        fits(&d.nominal.channels)
+    );
+    for ch in &d.location.channels {
+        let _ = writeln!(
+            s,
+            "   {}: residual RMS {:.4}, whiteness Q = {:.0} (p = {:.1e}, not used alone)",
+            ch.channel, ch.rms, ch.whiteness.q, ch.whiteness.p_value
+        );
+    }
+    for t in &d.tests {
+        let _ = writeln!(
+            s,
+            "   {:<48} p = {:<9.2e} {}",
+            t.name,
+            t.p_value,
+            if t.significant { "SIGNIFICANT" } else { "" }
+        );
+    }
+    let _ = writeln!(
+        s,
+        "   → {}",
+        if d.mismatch {
+            "mismatch: evidence survives Holm's correction"
+        } else {
+            "no mismatch: nothing survives Holm's correction; the model is kept as it is"
+        }
+    );
+    let _ = writeln!(s, "3. Locate (nominal residual):");
+    for (c, ch) in d.location.channels.iter().enumerate() {
+        let _ = writeln!(
+            s,
+            "   {}: cross-correlation peaks at {:+.2} s (v_ref), {:+.2} s (ω_ref); {}",
+            ["v", "ω"][c],
+            ch.peak_lag_s[0],
+            ch.peak_lag_s[1],
+            d.location.summary(c)
+        );
+    }
+    let _ = writeln!(s, "4. Name (fingerprints, score tests):");
+    for (round, fps) in d.fingerprints.iter().enumerate() {
+        let nominated: Vec<String> = fps
+            .iter()
+            .filter(|f| f.nominated)
+            .map(|f| {
+                format!(
+                    "{} (χ²({}) = {:.1}, p = {:.1e})",
+                    f.effect, f.dof, f.stat, f.p_value
+                )
+            })
+            .collect();
+        let _ = writeln!(
+            s,
+            "   round {}: {}",
+            round + 1,
+            if nominated.is_empty() {
+                "nothing nominated".to_owned()
+            } else {
+                nominated.join("; ")
+            }
+        );
+    }
+    let _ = writeln!(s, "5. Model and accept:");
+    for f in &d.findings {
+        let params: Vec<String> = f
+            .parameters
+            .iter()
+            .map(|(k, v)| {
+                format!(
+                    "{k} = {v:.4} ± {:.4}",
+                    f.std_err.get(k).copied().unwrap_or(0.0)
+                )
+            })
+            .collect();
+        let _ = writeln!(
+            s,
+            "   + {} on {}: {}; validation fit v {:.1} %, ω {:.1} %\n     {}",
+            f.effect,
+            f.channels.join(", "),
+            params.join(", "),
+            f.fit_percent_after.get("v").copied().unwrap_or(f64::NAN),
+            f.fit_percent_after.get("w").copied().unwrap_or(f64::NAN),
+            f.evidence
+        );
+    }
+    for r in &d.rejected {
+        let _ = writeln!(s, "   − {} not kept: {}", r.effect, r.reason);
+    }
+    if d.findings.is_empty() && d.rejected.is_empty() {
+        let _ = writeln!(s, "   nothing to add");
+    }
+    if let Some(u) = &d.unexplained {
+        let _ = writeln!(
+            s,
+            "   unexplained structure left in {}: {}",
+            u.channels.join(", "),
+            u.location.join("; ")
+        );
+    }
+    let _ = writeln!(
+        s,
+        "6. Show: validation fit nominal {} → final ({}) {}.",
+        fits(&d.nominal.channels),
+        d.final_stage.model,
+        fits(&d.final_stage.channels)
+    );
+    let _ = writeln!(s, "   ({:.2} s)", d.seconds);
+    s
 }

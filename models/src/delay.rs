@@ -68,15 +68,15 @@ pub(crate) fn merged_grid(
     }
     let tmax = rec.t.iter().fold(0.0f64, |a, t| a.max(t.abs()));
     let eps = 64.0 * f64::EPSILON * tmax.max(1.0);
-    let mut grid: Vec<f64> = rec.t.clone();
-    grid.extend(
-        rec.t
-            .iter()
-            .map(|&t| t + delay)
-            .chain(extra.iter().copied())
-            .filter(|&x| x > rec.t[0] && x < rec.t[n - 1]),
-    );
-    grid.sort_by(f64::total_cmp);
+    let inside = |x: &f64| *x > rec.t[0] && *x < rec.t[n - 1];
+    if delay == 0.0 && !extra.iter().any(inside) {
+        return Ok((rec.t.clone(), (0..n).collect()));
+    }
+    // Three sorted lists merged in linear time: the samples, the delayed samples, the extras.
+    let shifted: Vec<f64> = rec.t.iter().map(|&t| t + delay).filter(inside).collect();
+    let mut others: Vec<f64> = extra.iter().copied().filter(inside).collect();
+    others.sort_by(f64::total_cmp);
+    let mut grid = merge_sorted(&merge_sorted(&rec.t, &shifted), &others);
     grid.dedup_by(|a, b| (*a - *b).abs() <= eps);
     // Sample instants must come out exactly: a switch within eps of t_k (dedup may have kept
     // either) is replaced by t_k itself.
@@ -98,6 +98,24 @@ pub(crate) fn merged_grid(
         ));
     }
     Ok((merged_t, index))
+}
+
+/// The sorted union (with repeats) of two sorted lists.
+fn merge_sorted(a: &[f64], b: &[f64]) -> Vec<f64> {
+    let mut out = Vec::with_capacity(a.len() + b.len());
+    let (mut i, mut j) = (0, 0);
+    while i < a.len() && j < b.len() {
+        if a[i] <= b[j] {
+            out.push(a[i]);
+            i += 1;
+        } else {
+            out.push(b[j]);
+            j += 1;
+        }
+    }
+    out.extend_from_slice(&a[i..]);
+    out.extend_from_slice(&b[j..]);
+    out
 }
 
 /// Eq. 2.19 with an input dead time τ_d = θ7 [s] (`delayed`).

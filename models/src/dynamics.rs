@@ -31,6 +31,10 @@ use wheelid_core::{CommandHold, Error, Recording, Result, Sensitivities, Velocit
 
 /// Longest integration sub-step [s].
 pub const MAX_SUBSTEP: f64 = 0.02;
+/// Shortest integration sub-step [s]: time constants below a millisecond are not a robot's;
+/// a θ that asks for them (a fitter's trial step) integrates unstably and is rejected as a
+/// non-finite simulation instead of taking millions of sub-steps.
+pub const MIN_SUBSTEP: f64 = 1e-4;
 
 /// (v̇, ω̇) of eq. 2.19 for θ (length 6), state (v, ω) and commands (v_ref, ω_ref).
 #[inline]
@@ -94,12 +98,12 @@ fn for_each_substep(
 }
 
 /// Integration sub-step for θ: a tenth of the faster time constant (θ1/θ4, θ2/θ6), at most
-/// [`MAX_SUBSTEP`]; the global RK4 error of a step response is then below 1e-6 relative
+/// [`MAX_SUBSTEP`] and at least [`MIN_SUBSTEP`]; the global RK4 error of a step response is then below 1e-6 relative
 /// (per-step error (h/τ)⁵/120 ≈ 8e-8), far below any measurement's noise.
 pub fn substep(theta: &[f64; 6]) -> f64 {
     let tau = (theta[0] / theta[3]).abs().min((theta[1] / theta[5]).abs());
     if tau.is_finite() && tau > 0.0 {
-        (tau / 10.0).min(MAX_SUBSTEP)
+        (tau / 10.0).clamp(MIN_SUBSTEP, MAX_SUBSTEP)
     } else {
         MAX_SUBSTEP
     }

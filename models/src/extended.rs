@@ -128,6 +128,23 @@ impl Candidate {
         Candidate::Slip,
     ];
 
+    /// Every candidate's name, in [`Candidate::ALL`] order.
+    pub const NAMES: [&'static str; 8] = [
+        "input_delay",
+        "acceleration_limit",
+        "velocity_saturation",
+        "coulomb_friction",
+        "wheel_asymmetry",
+        "payload_change",
+        "gain_drift",
+        "slip",
+    ];
+
+    /// The candidate called `name` (one of [`Candidate::NAMES`]).
+    pub fn by_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|c| c.name() == name)
+    }
+
     /// The name (`input_delay`, …), as in the simulator's effects and the diagnosis report.
     pub fn name(self) -> &'static str {
         match self {
@@ -299,16 +316,15 @@ impl DynamicModel for Extended {
             let g = 1.0 + ph.drift * (t - t0);
             [uv * g, uw * g]
         };
+        // Dry friction only when present: tanh dominates the cost of a step.
+        let dry = ph.coulomb != [0.0, 0.0];
         let rhs = |th: &[f64; 6], v: f64, w: f64, u: [f64; 2]| {
-            let fv = u[0] + th[2] * w * w
-                - th[3] * v
-                - ph.coulomb[0] * (v / FRICTION_EPS[0]).tanh()
-                - th[3] * ph.slip[0] * v * w.abs();
-            let fw = u[1]
-                - th[4] * v * w
-                - th[5] * w
-                - ph.coulomb[1] * (w / FRICTION_EPS[1]).tanh()
-                - th[5] * ph.slip[1] * v.abs() * w;
+            let mut fv = u[0] + th[2] * w * w - th[3] * v - th[3] * ph.slip[0] * v * w.abs();
+            let mut fw = u[1] - th[4] * v * w - th[5] * w - th[5] * ph.slip[1] * v.abs() * w;
+            if dry {
+                fv -= ph.coulomb[0] * (v / FRICTION_EPS[0]).tanh();
+                fw -= ph.coulomb[1] * (w / FRICTION_EPS[1]).tanh();
+            }
             [fv / th[0], fw / th[1]]
         };
         // The rate-limited setpoint starts where it holds the initial state (a robot at rest

@@ -66,6 +66,10 @@ pub struct OutputError {
     /// Residual correlation length in samples for the covariance; `None`: the Newey–West rule
     /// L = ⌊4 (n/100)^{2/9}⌋ with n the samples of the longest recording.
     pub correlation_lags: Option<usize>,
+    /// Which samples enter the cost, per recording one flag per sample (validation blocks held
+    /// out are `false`); `None`: every sample. The model is still simulated over the whole
+    /// recording, so the held-out samples keep their place in time.
+    pub mask: Option<Vec<Vec<bool>>>,
 }
 
 impl Default for OutputError {
@@ -76,6 +80,7 @@ impl Default for OutputError {
             tolerance: 1e-10,
             patience: 100,
             correlation_lags: None,
+            mask: None,
         }
     }
 }
@@ -187,6 +192,8 @@ struct Problem<'a, M: ?Sized> {
     u: na::DVector<f64>,
     /// Offsets of each recording's rows.
     offsets: Vec<usize>,
+    /// Per recording, whether each sample enters the cost.
+    mask: Vec<Vec<bool>>,
     rows: usize,
     /// The last weighted Jacobian in (θ, x0) and the u it was taken at.
     last_jacobian: RefCell<Option<(na::DVector<f64>, DMatrix<f64>)>>,
@@ -303,7 +310,7 @@ impl<M: DynamicModel + ?Sized> Problem<'_, M> {
         for (r, rec) in self.recs.iter().enumerate() {
             let sens = self.sensitivities(&theta, &self.initial_of(u, r), rec)?;
             for (c, (sc, &w)) in sens.iter().zip(&self.weight).enumerate() {
-                for k in 0..rec.len() {
+                for k in (0..rec.len()).filter(|&k| self.mask[r][k]) {
                     let row = self.offsets[r] + k * s + c;
                     for j in 0..p {
                         jac[(row, j)] = -w * sc[(k, j)];
@@ -347,7 +354,7 @@ impl<M: DynamicModel + ?Sized> LeastSquaresProblem<f64, na::Dyn, na::Dyn> for Pr
         let mut out = na::DVector::zeros(self.rows);
         for (r, per) in raw.iter().enumerate() {
             for (c, e) in per.iter().enumerate() {
-                for (k, x) in e.iter().enumerate() {
+                for (k, x) in e.iter().enumerate().filter(|(k, _)| self.mask[r][*k]) {
                     out[self.offsets[r] + k * s + c] = self.weight[c] * x;
                 }
             }
@@ -435,15 +442,30 @@ impl OutputError {
         } else {
             0
         };
+        let mask: Vec<Vec<bool>> = match &self.mask {
+            Some(m) => {
+                if m.len() != recordings.len()
+                    || m.iter().zip(recordings).any(|(m, r)| m.len() != r.len())
+                {
+                    return Err(SolveError::InvalidProblem(
+                        "the sample mask must have one flag per sample of each recording".into(),
+                    ));
+                }
+                m.clone()
+            }
+            None => recordings.iter().map(|r| vec![true; r.len()]).collect(),
+        };
         let mut offsets = Vec::with_capacity(recordings.len());
         let mut rows = 0;
         for rec in recordings {
             offsets.push(rows);
             rows += rec.len() * s;
         }
-        if rows <= unknowns {
+        // Residuals that count: the masked-out rows stay in place as zeros.
+        let active = s * mask.iter().flatten().filter(|&&b| b).count();
+        if active <= unknowns {
             return Err(SolveError::InvalidProblem(format!(
-                "{rows} residuals cannot determine {unknowns} unknowns"
+                "{active} residuals cannot determine {unknowns} unknowns"
             )));
         }
         let first: Vec<Vec<f64>> = recordings
@@ -462,6 +484,7 @@ impl OutputError {
             fixed_initial: (!self.estimate_initial).then(|| first.clone()),
             u: na::DVector::from_vec(u0),
             offsets,
+            mask,
             rows,
             last_jacobian: RefCell::new(None),
         };
@@ -479,7 +502,7 @@ impl OutputError {
             ))
         })?;
         for pass in 0..MAX_PASSES {
-            let weight: Vec<f64> = channel_std(&raw, rows, unknowns)
+            let weight: Vec<f64> = channel_std(&raw, &problem.mask, active, unknowns)
                 .iter()
                 .map(|&sd| 1.0 / sd.max(1e-12))
                 .collect();
@@ -520,7 +543,7 @@ impl OutputError {
         // taken at θ̂.
         let u = problem.u.clone();
         let theta = problem.theta_of(&u);
-        let noise_std = channel_std(&raw, rows, unknowns);
+        let noise_std = channel_std(&raw, &problem.mask, active, unknowns);
         let cached = problem
             .last_jacobian
             .take()
@@ -534,7 +557,7 @@ impl OutputError {
         let mut e = DVector::zeros(rows);
         for (r, per) in raw.iter().enumerate() {
             for (c, ec) in per.iter().enumerate() {
-                for (k, x) in ec.iter().enumerate() {
+                for (k, x) in ec.iter().enumerate().filter(|(k, _)| problem.mask[r][*k]) {
                     e[problem.offsets[r] + k * s + c] = problem.weight[c] * x;
                 }
             }
@@ -572,7 +595,13 @@ impl OutputError {
             correlation_lags: 0,
         };
         let d = ols::decompose(&lp, 1e-12)?;
-        let full = sandwich(&d, &jac_free, &e, &problem.offsets, recordings, s, lags);
+        let spans: Vec<(usize, usize)> = problem
+            .offsets
+            .iter()
+            .zip(recordings)
+            .map(|(&o, r)| (o, r.len()))
+            .collect();
+        let full = sandwich(&d, &jac_free, &e, &spans, s, lags, active);
         let mut covariance = DMatrix::zeros(p, p);
         for (a, &i) in keep.iter().enumerate().filter(|(_, i)| **i < p) {
             for (b, &j) in keep.iter().enumerate().filter(|(_, j)| **j < p) {
@@ -593,7 +622,7 @@ impl OutputError {
             initial,
             noise_std,
             cost: e.norm_squared(),
-            residuals: rows,
+            residuals: active,
             evaluations,
             status,
             bound_state,
@@ -606,17 +635,18 @@ impl OutputError {
 /// The sandwich covariance of the module doc: bread from the SVD of the weighted Jacobian
 /// (J = U Σ Vᵀ D with D its column scaling), meat from the per-instant scores
 /// G_k = Σ_c J[(k, c), :]ᵀ e_(k, c) of each recording with Bartlett weights over `lags`
-/// instants (never across recordings), scaled by N/(N − P).
+/// instants (never across recordings; `spans` gives each one's first row and samples), scaled
+/// by N/(N − P), N the residuals in the cost (`rows`).
 fn sandwich(
     d: &ols::Decomposition,
     jac: &DMatrix<f64>,
     e: &DVector<f64>,
-    offsets: &[usize],
-    recordings: &[Recording],
+    spans: &[(usize, usize)],
     nch: usize,
     lags: usize,
+    rows: usize,
 ) -> DMatrix<f64> {
-    let (rows, k) = jac.shape();
+    let k = jac.ncols();
     // H⁻¹ = D⁻¹ V Σ⁻² Vᵀ D⁻¹.
     let mut a = d.v_t.transpose();
     for (j, mut c) in a.column_iter_mut().enumerate() {
@@ -629,8 +659,7 @@ fn sandwich(
         }
     }
     let mut meat = DMatrix::zeros(k, k);
-    for (rec, &off) in recordings.iter().zip(offsets) {
-        let n = rec.len();
+    for &(off, n) in spans {
         let g = DMatrix::from_fn(n, k, |t, j| {
             (0..nch)
                 .map(|c| jac[(off + t * nch + c, j)] * e[off + t * nch + c])
@@ -647,19 +676,26 @@ fn sandwich(
     &h_inv * meat * &h_inv * dof
 }
 
-/// Residual standard deviation per channel, with the degrees of freedom shared out in
-/// proportion to the channel's share of the residuals.
-fn channel_std(raw: &[Vec<Vec<f64>>], rows: usize, unknowns: usize) -> Vec<f64> {
+/// Residual standard deviation per channel over the samples in the cost, with the degrees of
+/// freedom shared out in proportion to the channel's share of the residuals.
+fn channel_std(
+    raw: &[Vec<Vec<f64>>],
+    mask: &[Vec<bool>],
+    rows: usize,
+    unknowns: usize,
+) -> Vec<f64> {
     let nch = raw.first().map_or(0, Vec::len);
     let dof_scale = rows as f64 / (rows - unknowns).max(1) as f64;
     (0..nch)
         .map(|c| {
-            let (ss, n) = raw.iter().fold((0.0, 0usize), |(ss, n), per| {
-                (
-                    ss + per[c].iter().map(|x| x * x).sum::<f64>(),
-                    n + per[c].len(),
-                )
-            });
+            let (ss, n) = raw
+                .iter()
+                .zip(mask)
+                .fold((0.0, 0usize), |(ss, n), (per, m)| {
+                    let kept = per[c].iter().zip(m).filter(|(_, b)| **b);
+                    let (a, b) = kept.fold((0.0, 0), |(a, b), (x, _)| (a + x * x, b + 1));
+                    (ss + a, n + b)
+                });
             (ss / n.max(1) as f64 * dof_scale).sqrt()
         })
         .collect()

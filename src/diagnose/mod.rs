@@ -1,0 +1,1454 @@
+//! Mismatch diagnosis: when the six-θ model (Laut 2011 eq. 2.19) and a recording disagree,
+//! find where, name the physics left out, model it and show the fit improve.
+//!
+//! One walk through the layers, each step visible in the [`Diagnosis`]:
+//!
+//! 1. **fit** — every recording is cut into [`DiagnoseSettings::blocks`] equal blocks; the odd
+//!    ones (2nd, 4th, …) are held out for validation and never enter a fit. θ is fitted by
+//!    output error (`wheelid_solvers::oe`, started from least squares) on the rest, the model
+//!    simulated free-run over the whole recording;
+//! 2. **test** — on the validation blocks: residual whiteness (Ljung–Box) and residual–command
+//!    independence (cross-correlation at lags −L…L with Ljung's bounds,
+//!    `wheelid_core::residual`), free-run fit %; on the training blocks: each candidate's
+//!    fingerprint, a score test of its pattern ([`score`]). A mismatch is declared only on
+//!    tests that survive Holm's correction over the whole family (independence and
+//!    fingerprints), never on whiteness alone;
+//! 3. **locate** — per channel, the residual by lag, frequency band, operating region and time
+//!    window ([`locate`]);
+//! 4. **name** — the candidates whose fingerprint survives the correction are nominated, the
+//!    strongest first: `input_delay`, `acceleration_limit`, `velocity_saturation`,
+//!    `coulomb_friction`, `wheel_asymmetry`, `payload_change`, `gain_drift`, `slip`
+//!    (`wheelid_models::Candidate`). A two-channel candidate acts on the channels whose own
+//!    pattern is significant; the other channel's parameter is held at its null;
+//! 5. **model and accept** — the extended model is fitted by output error; the candidate is
+//!    kept only if the validation cost Σ_c Σ_k e²/σ_c² drops by at least
+//!    [`DiagnoseSettings::min_improvement`] with no channel's validation fit falling by more
+//!    than a point, its parameters are significant (≥ 3 standard errors from the null; a limit
+//!    must bind on ≥ 1 % of the samples) and physically plausible, and its fingerprint is gone
+//!    (the pattern that nominated it no longer fits the new residual). Then the search starts
+//!    again from the extended model (forward selection, at most
+//!    [`DiagnoseSettings::max_effects`]). What stays significant is reported as
+//!    [`Unexplained`], with where it lives;
+//! 6. **show** — before/after fit % per channel on the validation blocks
+//!    (`crate::report::diagnosis_text`, `crate::plot::write_diagnosis_plots`, JSON).
+
+mod locate;
+mod score;
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use indicatif::{ProgressBar, ProgressStyle};
+use nalgebra::DMatrix;
+use serde::Serialize;
+use wheelid_core::condition::{self, ConditionSettings};
+use wheelid_core::residual::holm;
+use wheelid_core::{
+    ChannelInfo, DynamicModel, ParamInfo, Recording, RegressorModel, Result as CoreResult,
+    Simulation, metrics,
+};
+use wheelid_models::{Candidate, Extended};
+use wheelid_solvers::{Ols, OutputError, OutputErrorFit};
+
+pub use locate::{Band, ChannelLocation, Location, Share};
+use score::{Frame, Outputs, simulate_all};
+
+use crate::identify::{Estimator, IdentifySettings, identify};
+
+/// Errors of a diagnosis.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum DiagnoseError {
+    /// Reading or conditioning a recording failed.
+    #[error(transparent)]
+    Core(#[from] wheelid_core::Error),
+    /// The nominal identification failed.
+    #[error(transparent)]
+    Identify(#[from] crate::identify::IdentifyError),
+    /// The nominal output-error fit failed.
+    #[error("nominal output-error fit: {0}")]
+    Fit(#[from] wheelid_core::SolveError),
+    /// Bad settings or data too short to split.
+    #[error("{0}")]
+    Setting(String),
+}
+
+/// Settings of a diagnosis (the result is a [`Diagnosis`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct DiagnoseSettings {
+    /// Conditioning of the least-squares start and of the measured accelerations.
+    pub condition: ConditionSettings,
+    /// Equal blocks per recording; the 2nd, 4th, … are the validation blocks (≥ 3).
+    pub blocks: usize,
+    /// Family-wise level of the tests (Holm) [-].
+    pub alpha: f64,
+    /// Largest lag of the correlation tests [s].
+    pub max_lag_s: f64,
+    /// Smallest relative drop of the validation cost that counts as a clear improvement [-].
+    pub min_improvement: f64,
+    /// Most effects added.
+    pub max_effects: usize,
+    /// The candidate library searched.
+    pub candidates: Vec<Candidate>,
+    /// Wheel track d [m] for `wheel_asymmetry`; `None`: from the recording's metadata
+    /// (`track`, `kinematics: … track X m`, or a built-in `robot`), else the candidate is
+    /// skipped.
+    pub track_m: Option<f64>,
+    /// Show a progress bar on standard error (when it is a terminal).
+    pub progress: bool,
+}
+
+impl Default for DiagnoseSettings {
+    fn default() -> Self {
+        Self {
+            condition: ConditionSettings::default(),
+            blocks: 5,
+            alpha: 0.01,
+            max_lag_s: 2.0,
+            min_improvement: 0.05,
+            max_effects: 3,
+            candidates: Candidate::ALL.to_vec(),
+            track_m: None,
+            progress: false,
+        }
+    }
+}
+
+/// Free-run fit of one channel on the validation blocks.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct ChannelFit {
+    /// Fit % (100 (1 − ‖y − ŷ‖/‖y − ȳ‖)).
+    pub fit_percent: f64,
+    /// RMS of y − ŷ [channel unit].
+    pub rms: f64,
+}
+
+/// Both channels' validation fits.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct Channels {
+    /// Forward velocity.
+    pub v: ChannelFit,
+    /// Angular velocity.
+    pub w: ChannelFit,
+}
+
+/// A fitted model and how it does on the validation blocks.
+#[derive(Debug, Clone, Serialize)]
+pub struct Stage {
+    /// `nominal`, or the candidates added (`nominal + input_delay + …`).
+    pub model: String,
+    /// θ: θ1…θ6, then the candidates' parameters.
+    pub theta: Vec<f64>,
+    /// Standard errors of θ (output error, sandwich).
+    pub std_err: Vec<f64>,
+    /// Parameter names.
+    pub names: Vec<String>,
+    /// Validation fits.
+    pub channels: Channels,
+    /// Σ_c Σ_k e²/σ_c² over the validation samples, σ_c the nominal residual std.
+    pub validation_cost: f64,
+}
+
+/// One test of the family and its Holm decision.
+#[derive(Debug, Clone, Serialize)]
+pub struct TestResult {
+    /// What was tested.
+    pub name: String,
+    /// Its p-value.
+    pub p_value: f64,
+    /// Significant after Holm's correction at [`DiagnoseSettings::alpha`].
+    pub significant: bool,
+}
+
+/// A candidate's fingerprint in one round of the search.
+#[derive(Debug, Clone, Serialize)]
+pub struct Fingerprint {
+    /// Candidate name.
+    pub effect: String,
+    /// Channels whose own pattern is significant (|z| ≥ 2.5).
+    pub channels: Vec<String>,
+    /// Score statistic (χ² with `dof` degrees of freedom).
+    pub stat: f64,
+    /// Degrees of freedom.
+    pub dof: usize,
+    /// p-value (with the grid's Bonferroni factor for `payload_change`).
+    pub p_value: f64,
+    /// Survived Holm's correction: the candidate is nominated.
+    pub nominated: bool,
+    /// What the data show, in words.
+    pub evidence: String,
+}
+
+/// An effect that was added.
+#[derive(Debug, Clone, Serialize)]
+pub struct Finding {
+    /// Candidate name (`input_delay`, …).
+    pub effect: String,
+    /// Channels it acts on.
+    pub channels: Vec<String>,
+    /// Its fitted parameters [units of `wheelid_models::Candidate::params`].
+    pub parameters: BTreeMap<String, f64>,
+    /// Their standard errors.
+    pub std_err: BTreeMap<String, f64>,
+    /// Why it was named and kept.
+    pub evidence: String,
+    /// Validation fit % per channel with it.
+    pub fit_percent_after: BTreeMap<String, f64>,
+    /// Relative drop of the validation cost it brought [%].
+    pub validation_cost_drop_percent: f64,
+}
+
+/// A nominated candidate that was fitted and not kept.
+#[derive(Debug, Clone, Serialize)]
+pub struct Rejected {
+    /// Candidate name.
+    pub effect: String,
+    /// Why not.
+    pub reason: String,
+}
+
+/// Structure left in the residuals that no candidate explains.
+#[derive(Debug, Clone, Serialize)]
+pub struct Unexplained {
+    /// Channels with a significant residual–command correlation after Holm.
+    pub channels: Vec<String>,
+    /// Where it lives, per channel.
+    pub location: Vec<String>,
+}
+
+/// Per-recording series for the plots: measured, nominal and final simulated outputs.
+#[derive(Debug, Clone)]
+pub struct DiagnosisSeries {
+    /// Where it came from.
+    pub source: PathBuf,
+    /// Time [s].
+    pub t: Vec<f64>,
+    /// Validation sample flags.
+    pub validation: Vec<bool>,
+    /// Measured (v, ω).
+    pub measured: [Vec<f64>; 2],
+    /// Nominal model (v̂, ω̂).
+    pub nominal: [Vec<f64>; 2],
+    /// Final model (v̂, ω̂).
+    pub extended: [Vec<f64>; 2],
+}
+
+/// The result of a diagnosis (settings: [`DiagnoseSettings`]).
+#[derive(Debug, Clone, Serialize)]
+pub struct Diagnosis {
+    /// The nominal model's fit (step 1) and validation (step 2).
+    pub nominal: Stage,
+    /// Training and validation seconds.
+    pub split: Split,
+    /// The first round's test family with Holm decisions (step 2).
+    pub tests: Vec<TestResult>,
+    /// Whether a mismatch was declared.
+    pub mismatch: bool,
+    /// Where the nominal model's misfit lives (step 3).
+    pub location: Location,
+    /// Fingerprints per round (step 4).
+    pub fingerprints: Vec<Vec<Fingerprint>>,
+    /// Effects added, in order (step 5).
+    pub findings: Vec<Finding>,
+    /// Nominated candidates that were fitted and rejected.
+    pub rejected: Vec<Rejected>,
+    /// Structure no candidate explains.
+    pub unexplained: Option<Unexplained>,
+    /// The final model.
+    #[serde(rename = "final")]
+    pub final_stage: Stage,
+    /// Where the final model's misfit lives.
+    pub final_location: Location,
+    /// Wall time [s].
+    pub seconds: f64,
+    /// Series for the plots.
+    #[serde(skip)]
+    pub series: Vec<DiagnosisSeries>,
+}
+
+/// How the samples were split.
+#[derive(Debug, Clone, Serialize)]
+pub struct Split {
+    /// Blocks per recording.
+    pub blocks: usize,
+    /// Seconds used for fitting.
+    pub training_s: f64,
+    /// Seconds held out for validation.
+    pub validation_s: f64,
+}
+
+/// A value far beyond any command: a limit at this level never binds.
+const NEVER: f64 = 1e6;
+
+/// The extended model with some parameters held: the fitter sees only the free ones.
+struct Pinned<'a> {
+    inner: &'a Extended,
+    free: Vec<usize>,
+    full: Vec<f64>,
+    params: Vec<ParamInfo>,
+}
+
+impl<'a> Pinned<'a> {
+    fn new(inner: &'a Extended, full: Vec<f64>, pinned: &[usize]) -> Self {
+        let free: Vec<usize> = (0..full.len()).filter(|i| !pinned.contains(i)).collect();
+        let params = free.iter().map(|&i| inner.params()[i]).collect();
+        Self {
+            inner,
+            free,
+            full,
+            params,
+        }
+    }
+    fn expand(&self, theta: &[f64]) -> Vec<f64> {
+        let mut f = self.full.clone();
+        for (&i, &x) in self.free.iter().zip(theta) {
+            f[i] = x;
+        }
+        f
+    }
+    fn free_values(&self) -> Vec<f64> {
+        self.free.iter().map(|&i| self.full[i]).collect()
+    }
+}
+
+impl DynamicModel for Pinned<'_> {
+    fn name(&self) -> &str {
+        self.inner.name()
+    }
+    fn params(&self) -> &[ParamInfo] {
+        &self.params
+    }
+    fn channels(&self) -> &[ChannelInfo] {
+        self.inner.channels()
+    }
+    fn simulate(&self, theta: &[f64], rec: &Recording, initial: &[f64]) -> CoreResult<Simulation> {
+        self.inner.simulate(&self.expand(theta), rec, initial)
+    }
+}
+
+/// The model in hand during the search.
+#[derive(Debug, Clone)]
+struct Current {
+    candidates: Vec<Candidate>,
+    /// Indices of θ held at their null (inactive channels).
+    pinned: Vec<usize>,
+    theta: Vec<f64>,
+    std_err: Vec<f64>,
+    covariance: DMatrix<f64>,
+    initial: Vec<Vec<f64>>,
+    sim: Outputs,
+}
+
+/// Everything the search needs about the data.
+struct Data {
+    recs: Vec<Recording>,
+    /// Training flags.
+    train: Vec<Vec<bool>>,
+    /// Validation flags.
+    valid: Vec<Vec<bool>>,
+    dt: f64,
+    track: Option<f64>,
+    /// 1/σ_c of the nominal fit.
+    weight: [f64; 2],
+    /// Measured accelerations (smoothed derivative) per recording.
+    accel: Outputs,
+}
+
+impl Data {
+    fn model(&self, candidates: &[Candidate]) -> Extended {
+        // A missing track only matters to wheel_asymmetry, which is skipped then.
+        Extended::new(candidates, self.track.unwrap_or(1.0)).expect("candidates are distinct")
+    }
+    fn frame(&self) -> Frame<'_> {
+        Frame {
+            recs: &self.recs,
+            mask: &self.train,
+            weight: self.weight,
+        }
+    }
+    /// Validation fits and cost of simulated outputs.
+    fn validate(&self, sim: &Outputs) -> (Channels, f64) {
+        let mut y = [Vec::new(), Vec::new()];
+        let mut s = [Vec::new(), Vec::new()];
+        for ((rec, m), out) in self.recs.iter().zip(&self.valid).zip(sim) {
+            for k in (0..rec.len()).filter(|&k| m[k]) {
+                y[0].push(rec.v[k]);
+                y[1].push(rec.w[k]);
+                s[0].push(out[0][k]);
+                s[1].push(out[1][k]);
+            }
+        }
+        let fit = |c: usize| ChannelFit {
+            fit_percent: metrics::fit_percent(&y[c], &s[c]),
+            rms: (y[c]
+                .iter()
+                .zip(&s[c])
+                .map(|(a, b)| (a - b).powi(2))
+                .sum::<f64>()
+                / y[c].len().max(1) as f64)
+                .sqrt(),
+        };
+        let cost = (0..2)
+            .map(|c| {
+                y[c].iter()
+                    .zip(&s[c])
+                    .map(|(a, b)| ((a - b) * self.weight[c]).powi(2))
+                    .sum::<f64>()
+            })
+            .sum();
+        (
+            Channels {
+                v: fit(0),
+                w: fit(1),
+            },
+            cost,
+        )
+    }
+    fn max_lag(&self, settings: &DiagnoseSettings) -> usize {
+        let shortest = self
+            .valid
+            .iter()
+            .map(|m| m.iter().filter(|&&b| b).count())
+            .sum::<usize>();
+        ((settings.max_lag_s / self.dt).round() as usize).clamp(1, (shortest / 10).max(1))
+    }
+    /// Newey–West lag count of the score tests.
+    fn hac_lags(&self) -> usize {
+        let n = self.recs.iter().map(Recording::len).max().unwrap_or(0);
+        (4.0 * (n as f64 / 100.0).powf(2.0 / 9.0)).floor() as usize
+    }
+}
+
+/// Robust level: the `q` quantile of |x|.
+fn abs_quantile(x: impl Iterator<Item = f64>, q: f64) -> f64 {
+    let mut v: Vec<f64> = x.map(f64::abs).collect();
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(f64::total_cmp);
+    v[((v.len() - 1) as f64 * q).round() as usize]
+}
+
+/// The wheel track from the metadata: `track`, a `kinematics` line with `track X`, or the
+/// built-in profile named by `robot`.
+fn track_from_meta(rec: &Recording) -> Option<f64> {
+    if let Some(t) = rec
+        .meta("track")
+        .and_then(|s| s.split_whitespace().next()?.parse().ok())
+    {
+        return Some(t);
+    }
+    if let Some(k) = rec.meta("kinematics") {
+        let mut it = k.split_whitespace();
+        while let Some(w) = it.next() {
+            if w == "track"
+                && let Some(x) = it.next().and_then(|s| s.trim_end_matches(',').parse().ok())
+            {
+                return Some(x);
+            }
+        }
+    }
+    rec.meta("robot")
+        .and_then(wheelid_robots::RobotProfile::by_name)
+        .map(|p| p.track)
+}
+
+/// Fraction of the samples during which a setpoint slewing at `rate` towards command `ch`
+/// (v_ref, ω_ref, held between samples) has not caught up with it: how often a rate limit
+/// binds.
+fn slew_binding(recs: &[Recording], ch: usize, rate: f64) -> f64 {
+    let (mut bound, mut total) = (0usize, 0usize);
+    for r in recs {
+        let u = if ch == 0 { &r.v_ref } else { &r.w_ref };
+        let mut s = u[0];
+        for k in 1..u.len() {
+            let step = rate * (r.t[k] - r.t[k - 1]);
+            let gap = u[k - 1] - s;
+            s += gap.clamp(-step, step);
+            bound += usize::from(gap.abs() > step);
+            total += 1;
+        }
+    }
+    bound as f64 / total.max(1) as f64
+}
+
+/// Null values of a candidate's parameters given θ (the extended model is then the current
+/// one).
+fn null_values(c: Candidate, theta: &[f64], t_mid: f64) -> Vec<f64> {
+    match c {
+        Candidate::InputDelay => vec![0.0],
+        Candidate::AccelerationLimit | Candidate::VelocitySaturation => vec![NEVER, NEVER],
+        Candidate::CoulombFriction | Candidate::Slip => vec![0.0, 0.0],
+        Candidate::WheelAsymmetry => vec![1.0],
+        Candidate::PayloadChange => vec![t_mid, theta[0], theta[1], theta[2], theta[4]],
+        Candidate::GainDrift => vec![0.0],
+    }
+}
+
+/// Bounds of a candidate's parameters for the fit.
+fn candidate_bounds(c: Candidate, t_range: (f64, f64)) -> Vec<(f64, f64)> {
+    let inf = f64::INFINITY;
+    match c {
+        Candidate::InputDelay => vec![(0.0, 2.0)],
+        Candidate::AccelerationLimit | Candidate::VelocitySaturation => {
+            vec![(1e-6, inf), (1e-6, inf)]
+        }
+        Candidate::CoulombFriction | Candidate::Slip => vec![(0.0, inf), (0.0, inf)],
+        Candidate::WheelAsymmetry => vec![(0.2, 5.0)],
+        Candidate::PayloadChange => {
+            vec![t_range, (-inf, inf), (-inf, inf), (-inf, inf), (-inf, inf)]
+        }
+        Candidate::GainDrift => vec![(-inf, inf)],
+    }
+}
+
+/// A candidate's pattern columns and the guesses they come with.
+struct Pattern {
+    candidate: Candidate,
+    /// Columns per candidate parameter (None: not probed).
+    s: DMatrix<f64>,
+    /// Which candidate parameter each column belongs to.
+    param_of_col: Vec<usize>,
+    /// Parameter values: the probe levels or null + β̂ after the test.
+    guess: Vec<f64>,
+    /// Parameters held at their null (inactive channels).
+    inactive: Vec<usize>,
+    /// Description for the report.
+    evidence: String,
+    /// Bonferroni factor (grid of payload times).
+    grid: usize,
+}
+
+/// Builds the fingerprints of `c` at the current model; `None` if the candidate cannot act on
+/// these data (no probe level binds, no track for the asymmetry).
+fn patterns(c: Candidate, data: &Data, cur: &Current) -> Option<Vec<Pattern>> {
+    let frame = data.frame();
+    let mut cands = cur.candidates.clone();
+    cands.push(c);
+    let model = data.model(&cands);
+    let th6 = &cur.theta[..6];
+    let t_lo = data
+        .recs
+        .iter()
+        .map(|r| r.t[0])
+        .fold(f64::INFINITY, f64::min);
+    let t_hi = data
+        .recs
+        .iter()
+        .map(|r| r.t[r.len() - 1])
+        .fold(f64::NEG_INFINITY, f64::max);
+    let null = null_values(c, th6, 0.5 * (t_lo + t_hi));
+    let with = |vals: &[f64]| {
+        let mut th = cur.theta.clone();
+        th.extend_from_slice(vals);
+        simulate_all(&model, &th, &data.recs, &cur.initial)
+    };
+    let fd = |vals: &[f64], j: usize, h: f64| -> Option<nalgebra::DVector<f64>> {
+        let mut v = vals.to_vec();
+        v[j] += h;
+        let y = with(&v)?;
+        Some(frame.flatten(&score::difference(&y, &cur.sim, h)))
+    };
+    let cmd = |ch: usize| {
+        data.recs.iter().flat_map(move |r| {
+            if ch == 0 {
+                r.v_ref.iter().copied()
+            } else {
+                r.w_ref.iter().copied()
+            }
+        })
+    };
+    let meas = |ch: usize| {
+        data.recs
+            .iter()
+            .flat_map(move |r| if ch == 0 { r.v.iter() } else { r.w.iter() }.copied())
+    };
+    let gain = [th6[3], th6[5]];
+    let single =
+        |cols: Vec<nalgebra::DVector<f64>>, params: Vec<usize>, evidence: String| Pattern {
+            candidate: c,
+            s: DMatrix::from_columns(&cols),
+            param_of_col: params,
+            guess: null.clone(),
+            inactive: Vec::new(),
+            evidence,
+            grid: 1,
+        };
+    match c {
+        Candidate::InputDelay => {
+            let h = 0.5 * data.dt;
+            Some(vec![single(
+                vec![fd(&null, 0, h)?],
+                vec![0],
+                "the residual follows the commands' changes".into(),
+            )])
+        }
+        Candidate::CoulombFriction => {
+            let cols = (0..2)
+                .map(|ch| fd(&null, ch, 1e-3 * abs_quantile(cmd(ch), 0.9).max(1e-6)))
+                .collect::<Option<Vec<_>>>()?;
+            Some(vec![single(
+                cols,
+                vec![0, 1],
+                "the residual opposes the direction of travel".into(),
+            )])
+        }
+        Candidate::Slip => {
+            let cols = (0..2)
+                .map(|ch| fd(&null, ch, 1e-3))
+                .collect::<Option<Vec<_>>>()?;
+            Some(vec![single(
+                cols,
+                vec![0, 1],
+                "the residual grows with |v·ω|".into(),
+            )])
+        }
+        Candidate::WheelAsymmetry => {
+            data.track?;
+            Some(vec![single(
+                vec![fd(&null, 0, 1e-3)?],
+                vec![0],
+                "ω's residual follows v_ref".into(),
+            )])
+        }
+        Candidate::GainDrift => Some(vec![single(
+            vec![fd(&null, 0, 1e-5)?],
+            vec![0],
+            "the residual scales with the command as time goes on".into(),
+        )]),
+        Candidate::VelocitySaturation | Candidate::AccelerationLimit => {
+            // Probe levels in setpoint units, from the measured response.
+            let sat = c == Candidate::VelocitySaturation;
+            let mut cols = Vec::new();
+            let mut params = Vec::new();
+            let mut probe = null.clone();
+            let mut words = Vec::new();
+            for ch in 0..2 {
+                let name = ["v", "ω"][ch];
+                let (level, binding) = if sat {
+                    let y = abs_quantile(meas(ch), 0.995);
+                    let level = gain[ch].abs() * y;
+                    let u: Vec<f64> = cmd(ch).collect();
+                    let over = u.iter().filter(|x| x.abs() > 1.05 * level).count() as f64
+                        / u.len().max(1) as f64;
+                    words.push(format!(
+                        "|{name}| stays within {y:.3} while the command exceeds the matching \
+                         setpoint {level:.3} on {:.1} % of the samples",
+                        100.0 * over
+                    ));
+                    (level, over >= 0.01)
+                } else {
+                    let acc = data.accel.iter().flat_map(|a| a[ch].iter().copied());
+                    let a = abs_quantile(acc, 0.995);
+                    let level = gain[ch].abs() * a;
+                    let over = slew_binding(&data.recs, ch, level);
+                    words.push(format!(
+                        "{name}'s measured acceleration tops out at {a:.3} while the commands \
+                         step faster on {:.1} % of the samples",
+                        100.0 * over
+                    ));
+                    (level, over >= 0.01)
+                };
+                if binding && level > 0.0 {
+                    let mut v = null.clone();
+                    v[ch] = level;
+                    probe[ch] = level;
+                    let y = with(&v)?;
+                    cols.push(frame.flatten(&score::difference(&y, &cur.sim, 1.0)));
+                    params.push(ch);
+                }
+            }
+            if cols.is_empty() {
+                return None;
+            }
+            let mut p = single(cols, params, words.join("; "));
+            p.guess = probe;
+            Some(vec![p])
+        }
+        Candidate::PayloadChange => {
+            // A grid of change times over the middle of the run.
+            let grid = 7;
+            let mut out = Vec::new();
+            for g in 1..=grid {
+                let ts = t_lo + (t_hi - t_lo) * g as f64 / (grid + 1) as f64;
+                let mut vals = null.clone();
+                vals[0] = ts;
+                let cols = (1..5)
+                    .map(|j| fd(&vals, j, 1e-3 * vals[j].abs().max(1e-3)))
+                    .collect::<Option<Vec<_>>>()?;
+                let mut p = single(
+                    cols,
+                    vec![1, 2, 3, 4],
+                    format!("the dynamics change around t = {ts:.1} s"),
+                );
+                p.guess = vals;
+                p.grid = grid;
+                out.push(p);
+            }
+            Some(out)
+        }
+    }
+}
+
+/// One candidate's fingerprint at the current model: the best pattern (over the payload
+/// grid) with its score.
+struct Nominee {
+    pattern: Pattern,
+    score: score::Score,
+    p_value: f64,
+}
+
+fn fingerprint(
+    c: Candidate,
+    data: &Data,
+    cur: &Current,
+    q: &DMatrix<f64>,
+    e: &nalgebra::DVector<f64>,
+) -> Option<Nominee> {
+    let frame = data.frame();
+    let lags = data.hac_lags();
+    let mut best: Option<Nominee> = None;
+    for mut pattern in patterns(c, data, cur)? {
+        let Some(s) = score::score(&frame, q, &pattern.s, e, lags) else {
+            continue;
+        };
+        let p_value = (s.p_value * pattern.grid as f64).min(1.0);
+        // Channels: columns whose own z is large; the others stay at their null.
+        let two = matches!(
+            c,
+            Candidate::AccelerationLimit
+                | Candidate::VelocitySaturation
+                | Candidate::CoulombFriction
+                | Candidate::Slip
+        );
+        if two {
+            let mut active: Vec<usize> = pattern
+                .param_of_col
+                .iter()
+                .zip(&s.z)
+                .filter(|(_, z)| z.abs() >= 2.5)
+                .map(|(&j, _)| j)
+                .collect();
+            if active.is_empty()
+                && let Some((j, _)) = pattern
+                    .param_of_col
+                    .iter()
+                    .zip(&s.z)
+                    .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
+            {
+                active.push(*j);
+            }
+            pattern.inactive = (0..2).filter(|j| !active.contains(j)).collect();
+        }
+        // First guess: the probe level, or one Gauss–Newton step from the null.
+        for (col, &j) in pattern.param_of_col.iter().enumerate() {
+            match c {
+                Candidate::VelocitySaturation | Candidate::AccelerationLimit => {}
+                _ => pattern.guess[j] += s.beta[col],
+            }
+        }
+        let better = best
+            .as_ref()
+            .is_none_or(|b| p_value < b.p_value || (p_value == b.p_value && s.stat > b.score.stat));
+        if better {
+            best = Some(Nominee {
+                pattern,
+                score: s,
+                p_value,
+            });
+        }
+    }
+    best
+}
+
+/// The channels a candidate acts on: both, ω only for the wheel asymmetry (v_ref leaking into
+/// ω), or for two-channel candidates those whose parameter is `active`.
+fn channels_of(c: Candidate, active: impl Fn(usize) -> bool) -> Vec<String> {
+    match c {
+        Candidate::AccelerationLimit
+        | Candidate::VelocitySaturation
+        | Candidate::CoulombFriction
+        | Candidate::Slip => (0..2)
+            .filter(|&j| active(j))
+            .map(|j| ["v", "w"][j].to_owned())
+            .collect(),
+        Candidate::WheelAsymmetry => vec!["w".into()],
+        _ => vec!["v".into(), "w".into()],
+    }
+}
+
+/// Fits the current model plus `nominee` on the training blocks; returns the new state and
+/// the fit.
+fn fit_candidate(
+    data: &Data,
+    cur: &Current,
+    nominee: &Nominee,
+) -> std::result::Result<(Current, OutputErrorFit), String> {
+    let c = nominee.pattern.candidate;
+    let mut cands = cur.candidates.clone();
+    cands.push(c);
+    let model = data.model(&cands);
+    let base = cur.theta.len();
+    let mut guess = nominee.pattern.guess.clone();
+    let t_lo = data
+        .recs
+        .iter()
+        .map(|r| r.t[0])
+        .fold(f64::INFINITY, f64::min);
+    let t_hi = data
+        .recs
+        .iter()
+        .map(|r| r.t[r.len() - 1])
+        .fold(f64::NEG_INFINITY, f64::max);
+    let margin = 0.05 * (t_hi - t_lo);
+    let mut bounds: Vec<(f64, f64)> = vec![(f64::NEG_INFINITY, f64::INFINITY); base];
+    let cb = candidate_bounds(c, (t_lo + margin, t_hi - margin));
+    for (g, &(lo, hi)) in guess.iter_mut().zip(&cb) {
+        let span = if hi.is_finite() && lo.is_finite() {
+            1e-3 * (hi - lo)
+        } else {
+            1e-6
+        };
+        *g = g.clamp(lo + span, hi - span);
+    }
+    // A friction or a loss that the residual asks to be negative is no such physics.
+    if matches!(c, Candidate::CoulombFriction | Candidate::Slip) {
+        for (j, info) in c.params().iter().enumerate() {
+            if !nominee.pattern.inactive.contains(&j) && nominee.pattern.guess[j] <= 0.0 {
+                return Err(format!(
+                    "its pattern asks for a negative {} ({:.3e})",
+                    info.name, nominee.pattern.guess[j]
+                ));
+            }
+        }
+    }
+    let frame = data.frame();
+    let mut theta = cur.theta.clone();
+    theta.extend_from_slice(&guess);
+    let training_cost = |th: &[f64]| {
+        simulate_all(&model, th, &data.recs, &cur.initial)
+            .map_or(f64::INFINITY, |y| frame.residuals(&y).norm_squared())
+    };
+    // A dead time is searched on a grid first: its cost has many local minima.
+    if c == Candidate::InputDelay {
+        let mut best = (f64::INFINITY, guess[0]);
+        let mut d = 0.5 * data.dt;
+        let mut grid = vec![guess[0]];
+        while d <= 1.5 {
+            grid.push(d);
+            d *= 1.4;
+        }
+        for d in grid {
+            theta[base] = d;
+            let cost = training_cost(&theta);
+            if cost < best.0 {
+                best = (cost, d);
+            }
+        }
+        theta[base] = best.1;
+    }
+    bounds.extend(cb);
+    let mut pinned = cur.pinned.clone();
+    for &j in &nominee.pattern.inactive {
+        pinned.push(base + j);
+        theta[base + j] = null_values(c, &cur.theta, 0.0)[j];
+    }
+    // A change time is not fitted by gradient: the training cost is flat while it sweeps a
+    // validation block. It is held, θ fitted, then the time scanned on a fine grid with that θ
+    // (the middle of the flat minimum taken), and θ fitted again if it moved.
+    if c == Candidate::PayloadChange {
+        pinned.push(base);
+    }
+    let run =
+        |theta: &[f64]| -> std::result::Result<(OutputErrorFit, Vec<f64>, Vec<usize>), String> {
+            let restricted = Pinned::new(&model, theta.to_vec(), &pinned);
+            let free_bounds: Vec<(f64, f64)> = restricted.free.iter().map(|&i| bounds[i]).collect();
+            let oe = OutputError {
+                bounds: Some(free_bounds),
+                mask: Some(data.train.clone()),
+                patience: 10,
+                tolerance: 1e-8,
+                ..OutputError::default()
+            };
+            let fit = oe
+                .fit(&restricted, &data.recs, &restricted.free_values())
+                .map_err(|e| format!("the fit failed: {e}"))?;
+            let full = restricted.expand(&fit.theta);
+            Ok((fit, full, restricted.free))
+        };
+    let (mut fit, mut full, mut free) = run(&theta)?;
+    let mut time_resolution = 0.0;
+    if c == Candidate::PayloadChange {
+        let step = (t_hi - t_lo) / (nominee.pattern.grid + 1) as f64;
+        let t0 = full[base];
+        let scan: Vec<(f64, f64)> = (-16..=16)
+            .map(|i| {
+                let mut th = full.clone();
+                th[base] = (t0 + step * i as f64 / 16.0).clamp(t_lo + margin, t_hi - margin);
+                let cost = simulate_all(&model, &th, &data.recs, &fit.initial)
+                    .map_or(f64::INFINITY, |y| frame.residuals(&y).norm_squared());
+                (th[base], cost)
+            })
+            .collect();
+        let least = scan.iter().map(|x| x.1).fold(f64::INFINITY, f64::min);
+        let flat: Vec<f64> = scan
+            .iter()
+            .filter(|x| x.1 <= least * (1.0 + 1e-6) + 1e-12)
+            .map(|x| x.0)
+            .collect();
+        let (lo, hi) = (flat[0], flat[flat.len() - 1]);
+        time_resolution = 0.5 * (hi - lo) + step / 32.0;
+        let t_best = 0.5 * (lo + hi);
+        if (t_best - t0).abs() > 1e-9 {
+            let mut th = full.clone();
+            th[base] = t_best;
+            (fit, full, free) = run(&th)?;
+        }
+    }
+    let p = full.len();
+    let mut std_err = vec![0.0; p];
+    let mut covariance = DMatrix::zeros(p, p);
+    for (a, &i) in free.iter().enumerate() {
+        std_err[i] = fit.std_err[a];
+        for (b, &j) in free.iter().enumerate() {
+            covariance[(i, j)] = fit.covariance[(a, b)];
+        }
+    }
+    if c == Candidate::PayloadChange {
+        // The change time's uncertainty is the width of its flat minimum.
+        std_err[base] = time_resolution;
+    }
+    let sim = simulate_all(&model, &full, &data.recs, &fit.initial)
+        .ok_or("the fitted model does not simulate")?;
+    Ok((
+        Current {
+            candidates: cands,
+            pinned,
+            theta: full,
+            std_err,
+            covariance,
+            initial: fit.initial.clone(),
+            sim,
+        },
+        fit,
+    ))
+}
+
+/// Significance and plausibility of a fitted candidate; `Err` says why not.
+fn check_candidate(data: &Data, new: &Current, c: Candidate) -> std::result::Result<(), String> {
+    let base = new.theta.len() - c.params().len();
+    let th = &new.theta;
+    let se = &new.std_err;
+    let names = c.params();
+    let free: Vec<usize> = (0..names.len())
+        .filter(|j| !new.pinned.contains(&(base + j)))
+        .collect();
+    let z = |j: usize, null: f64| {
+        let s = se[base + j];
+        if s > 0.0 {
+            (th[base + j] - null).abs() / s
+        } else {
+            0.0
+        }
+    };
+    let too_small = |j: usize, null: f64| -> Option<String> {
+        (z(j, null) < 3.0).then(|| {
+            format!(
+                "{} = {:.4} ± {:.4} is not significant (< 3 σ from {null})",
+                names[j].name,
+                th[base + j],
+                se[base + j]
+            )
+        })
+    };
+    let u_max = |ch: usize| {
+        abs_quantile(
+            data.recs.iter().flat_map(|r| {
+                if ch == 0 {
+                    r.v_ref.iter()
+                } else {
+                    r.w_ref.iter()
+                }
+                .copied()
+            }),
+            1.0,
+        )
+    };
+    let span = data
+        .recs
+        .iter()
+        .map(|r| r.t[r.len() - 1] - r.t[0])
+        .fold(0.0f64, f64::max);
+    for &j in &free {
+        let x = th[base + j];
+        let why = match c {
+            Candidate::InputDelay => too_small(j, 0.0)
+                .or_else(|| (x > 1.5).then(|| format!("a dead time of {x:.3} s is not plausible"))),
+            Candidate::VelocitySaturation | Candidate::AccelerationLimit => {
+                let s = se[base + j];
+                let rel = if x > 0.0 { s / x } else { f64::INFINITY };
+                // How often the limit binds.
+                let frac = if c == Candidate::VelocitySaturation {
+                    let u = data.recs.iter().flat_map(|r| {
+                        if j == 0 {
+                            r.v_ref.iter()
+                        } else {
+                            r.w_ref.iter()
+                        }
+                        .copied()
+                    });
+                    let (over, n) = u.fold((0usize, 0usize), |(a, n), x| {
+                        (a + usize::from(x.abs() > th[base + j]), n + 1)
+                    });
+                    over as f64 / n.max(1) as f64
+                } else {
+                    slew_binding(&data.recs, j, th[base + j])
+                };
+                if rel.is_nan() || rel >= 1.0 / 3.0 {
+                    Some(format!(
+                        "{} = {x:.4} ± {s:.4} is not significant",
+                        names[j].name
+                    ))
+                } else if frac < 0.01 {
+                    Some(format!(
+                        "{} = {x:.4} binds on only {:.2} % of the samples",
+                        names[j].name,
+                        100.0 * frac
+                    ))
+                } else {
+                    None
+                }
+            }
+            Candidate::CoulombFriction => too_small(j, 0.0).or_else(|| {
+                (x > 0.5 * u_max(j)).then(|| {
+                    format!(
+                        "{} = {x:.4} is more than half the largest command",
+                        names[j].name
+                    )
+                })
+            }),
+            Candidate::WheelAsymmetry => too_small(j, 1.0).or_else(|| {
+                (!(0.5..=2.0).contains(&x))
+                    .then(|| format!("a wheel gain ratio of {x:.3} is not plausible"))
+            }),
+            Candidate::PayloadChange => {
+                let i = [0, 0, 1, 2, 4][j];
+                ((1..=2).contains(&j) && !(0.2..=5.0).contains(&(x / th[i]))).then(|| {
+                    format!(
+                        "{} = {x:.4} is not plausible (θ{} = {:.4} before)",
+                        names[j].name,
+                        i + 1,
+                        th[i]
+                    )
+                })
+            }
+            Candidate::GainDrift => too_small(j, 0.0).or_else(|| {
+                (x.abs() * span > 0.5).then(|| {
+                    format!("a gain drift of {x:.2e}/s changes the gains by over 50 % in the run")
+                })
+            }),
+            Candidate::Slip => too_small(j, 0.0),
+        };
+        if let Some(w) = why {
+            return Err(w);
+        }
+    }
+    if c == Candidate::PayloadChange {
+        let changed = (1..=2).any(|j| {
+            let i = j - 1;
+            let var = new.covariance[(base + j, base + j)] + new.covariance[(i, i)]
+                - 2.0 * new.covariance[(base + j, i)];
+            let sd = var.max(0.0).sqrt();
+            sd > 0.0 && (th[base + j] - th[i]).abs() / sd >= 3.0
+        });
+        if !changed {
+            return Err("θ1 and θ2 after the change are within 3 σ of before".into());
+        }
+    }
+    Ok(())
+}
+
+/// Runs a diagnosis of `recordings` with the nominal `model` (its θ seeds every extended
+/// model).
+///
+/// # Errors
+/// [`DiagnoseError`] for unreadable or too-short data, or a nominal fit that fails.
+pub fn diagnose(
+    recordings: &[Recording],
+    model: &dyn RegressorModel,
+    settings: &DiagnoseSettings,
+) -> Result<Diagnosis, DiagnoseError> {
+    let clock = Instant::now();
+    if recordings.is_empty() {
+        return Err(DiagnoseError::Setting("no recording given".into()));
+    }
+    if settings.blocks < 3 {
+        return Err(DiagnoseError::Setting(format!(
+            "blocks = {} must be at least 3",
+            settings.blocks
+        )));
+    }
+    let bar = if settings.progress {
+        ProgressBar::new(4)
+    } else {
+        ProgressBar::hidden()
+    };
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} diagnose [{bar:30}] {pos}/{len} {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    bar.set_message("fitting the nominal model");
+    // 1. fit
+    let recs: Vec<Recording> = recordings
+        .iter()
+        .map(|r| condition::make_uniform(r).map(|(u, _)| u))
+        .collect::<Result<_, _>>()?;
+    let mut train = Vec::new();
+    let mut valid = Vec::new();
+    for r in &recs {
+        let n = r.len();
+        if n < 10 * settings.blocks {
+            return Err(DiagnoseError::Setting(format!(
+                "{}: {n} samples are too few to split into {} blocks",
+                r.source.display(),
+                settings.blocks
+            )));
+        }
+        let m: Vec<bool> = (0..n)
+            .map(|k| (k * settings.blocks / n).is_multiple_of(2))
+            .collect();
+        valid.push(m.iter().map(|b| !b).collect::<Vec<bool>>());
+        train.push(m);
+    }
+    let dt = recs
+        .iter()
+        .map(|r| r.sampling().dt_median)
+        .fold(f64::INFINITY, f64::min);
+    let seconds = |m: &[Vec<bool>]| m.iter().flatten().filter(|&&b| b).count() as f64 * dt;
+    let split = Split {
+        blocks: settings.blocks,
+        training_s: seconds(&train),
+        validation_s: seconds(&valid),
+    };
+    let ls = identify(
+        &recs,
+        model,
+        &Ols::default(),
+        &IdentifySettings {
+            condition: settings.condition.clone(),
+            estimator: Estimator::Ls,
+            ..IdentifySettings::default()
+        },
+    )?;
+    let oe = OutputError {
+        mask: Some(train.clone()),
+        ..OutputError::default()
+    };
+    let nominal_fit = oe.fit(model, &recs, &ls.theta)?;
+    let track = settings
+        .track_m
+        .or_else(|| recs.iter().find_map(track_from_meta));
+    // Measured accelerations: derivative of the zero-phase filtered response.
+    let cutoff = condition::suggest_cutoff(&recs.iter().collect::<Vec<_>>())
+        .map(|(f, _)| f)
+        .ok();
+    let accel: Outputs = recs
+        .iter()
+        .map(|r| {
+            let d = cutoff
+                .and_then(|fc| condition::condition(r, None, fc, &settings.condition).ok())
+                .and_then(|c| Some([c.differentiate(&c.v).ok()?, c.differentiate(&c.w).ok()?]));
+            d.unwrap_or_else(|| [vec![0.0; r.len()], vec![0.0; r.len()]])
+        })
+        .collect();
+    let weight = [0, 1].map(|c| 1.0 / nominal_fit.noise_std[c].max(1e-12));
+    let data = Data {
+        recs,
+        train,
+        valid,
+        dt,
+        track,
+        weight,
+        accel,
+    };
+    let nominal_model = data.model(&[]);
+    let sim = simulate_all(
+        &nominal_model,
+        &nominal_fit.theta,
+        &data.recs,
+        &nominal_fit.initial,
+    )
+    .ok_or_else(|| DiagnoseError::Setting("the nominal model does not simulate".into()))?;
+    let mut cur = Current {
+        candidates: Vec::new(),
+        pinned: Vec::new(),
+        theta: nominal_fit.theta.clone(),
+        std_err: nominal_fit.std_err.clone(),
+        covariance: nominal_fit.covariance.clone(),
+        initial: nominal_fit.initial.clone(),
+        sim,
+    };
+    let stage = |cur: &Current| {
+        let (channels, validation_cost) = data.validate(&cur.sim);
+        let model = data.model(&cur.candidates);
+        Stage {
+            model: std::iter::once("nominal")
+                .chain(cur.candidates.iter().map(|c| c.name()))
+                .collect::<Vec<_>>()
+                .join(" + "),
+            theta: cur.theta.clone(),
+            std_err: cur.std_err.clone(),
+            names: model.params().iter().map(|p| p.name.to_owned()).collect(),
+            channels,
+            validation_cost,
+        }
+    };
+    let nominal = stage(&cur);
+    bar.inc(1);
+    // 2.–3. test and locate
+    bar.set_message("testing the residuals");
+    let max_lag = data.max_lag(settings);
+    let location = locate::locate(&data.recs, &cur.sim, &data.valid, dt, max_lag);
+    // 4.–5. name, model, accept; then look again.
+    let mut findings = Vec::new();
+    let mut rejected = Vec::new();
+    let mut rounds = Vec::new();
+    let mut tests = Vec::new();
+    let mut mismatch = false;
+    let mut tried: Vec<Candidate> = Vec::new();
+    for round in 0..=settings.max_effects {
+        let frame = data.frame();
+        let e = frame.residuals(&cur.sim);
+        let cur_model = data.model(&cur.candidates);
+        let free: Vec<usize> = (0..cur.theta.len())
+            .filter(|i| !cur.pinned.contains(i))
+            .collect();
+        let pinned_model = Pinned::new(&cur_model, cur.theta.clone(), &cur.pinned);
+        let Some(j) = score::jacobian(
+            &pinned_model,
+            &free.iter().map(|&i| cur.theta[i]).collect::<Vec<_>>(),
+            &cur.initial,
+            &cur.sim,
+            &frame,
+        ) else {
+            break;
+        };
+        let q = score::basis(&j);
+        let pending: Vec<Candidate> = settings
+            .candidates
+            .iter()
+            .copied()
+            .filter(|c| !cur.candidates.contains(c) && !tried.contains(c))
+            .collect();
+        let nominees: Vec<Nominee> = pending
+            .iter()
+            .filter_map(|&c| fingerprint(c, &data, &cur, &q, &e))
+            .collect();
+        // The family: residual–command independence (validation) and the fingerprints.
+        let here = if round == 0 {
+            location.clone()
+        } else {
+            locate::locate(&data.recs, &cur.sim, &data.valid, dt, max_lag)
+        };
+        let mut p_values = here.p_values();
+        p_values.extend(nominees.iter().map(|n| n.p_value));
+        let decisions = holm(&p_values, settings.alpha);
+        if round == 0 {
+            let names = ["v_ref", "w_ref"];
+            for (i, ch) in ["v", "w"].iter().enumerate() {
+                for (k, u) in names.iter().enumerate() {
+                    tests.push(TestResult {
+                        name: format!("{ch} residual independent of {u}"),
+                        p_value: p_values[2 * i + k],
+                        significant: decisions[2 * i + k],
+                    });
+                }
+            }
+            for (n, (&p, &d)) in nominees
+                .iter()
+                .zip(p_values[4..].iter().zip(&decisions[4..]))
+            {
+                tests.push(TestResult {
+                    name: format!("fingerprint of {}", n.pattern.candidate.name()),
+                    p_value: p,
+                    significant: d,
+                });
+            }
+            mismatch = decisions.iter().any(|&d| d);
+        }
+        let nominated: Vec<bool> = decisions[4..].to_vec();
+        rounds.push(
+            nominees
+                .iter()
+                .zip(&nominated)
+                .map(|(n, &d)| Fingerprint {
+                    effect: n.pattern.candidate.name().into(),
+                    channels: channels_of(n.pattern.candidate, |j| {
+                        !n.pattern.inactive.contains(&j)
+                    }),
+                    stat: n.score.stat,
+                    dof: n.score.dof,
+                    p_value: n.p_value,
+                    nominated: d,
+                    evidence: n.pattern.evidence.clone(),
+                })
+                .collect::<Vec<_>>(),
+        );
+        if round == settings.max_effects || !mismatch {
+            break;
+        }
+        let mut order: Vec<usize> = (0..nominees.len()).filter(|&i| nominated[i]).collect();
+        order.sort_by(|&a, &b| {
+            let (na, nb) = (&nominees[a], &nominees[b]);
+            na.p_value.total_cmp(&nb.p_value).then(
+                (nb.score.stat / nb.score.dof as f64)
+                    .total_cmp(&(na.score.stat / na.score.dof as f64)),
+            )
+        });
+        bar.set_length(bar.position() + order.len() as u64 + 1);
+        let (_, cost_before) = data.validate(&cur.sim);
+        let before = data.validate(&cur.sim).0;
+        let mut accepted = None;
+        for i in order {
+            let n = &nominees[i];
+            let c = n.pattern.candidate;
+            bar.set_message(format!("fitting {}", c.name()));
+            bar.inc(1);
+            tried.push(c);
+            let verdict = fit_candidate(&data, &cur, n).and_then(|(new, _)| {
+                let (after, cost) = data.validate(&new.sim);
+                let drop = 1.0 - cost / cost_before;
+                if drop < settings.min_improvement {
+                    return Err(format!(
+                        "the validation cost drops by {:.1} % only (< {:.0} %)",
+                        100.0 * drop,
+                        100.0 * settings.min_improvement
+                    ));
+                }
+                for (name, b, a) in [
+                    ("v", before.v.fit_percent, after.v.fit_percent),
+                    ("ω", before.w.fit_percent, after.w.fit_percent),
+                ] {
+                    if a < b - 1.0 {
+                        return Err(format!(
+                            "{name}'s validation fit falls from {b:.1} % to {a:.1} %"
+                        ));
+                    }
+                }
+                check_candidate(&data, &new, c)?;
+                // The fingerprint must be gone from the new residual.
+                let e_new = frame.residuals(&new.sim);
+                if let Some(s) = score::score(&frame, &q, &n.pattern.s, &e_new, data.hac_lags())
+                    && s.p_value * (n.pattern.grid as f64) < settings.alpha
+                {
+                    return Err(format!(
+                        "its fingerprint stays (χ²({}) = {:.1}, p = {:.1e})",
+                        s.dof, s.stat, s.p_value
+                    ));
+                }
+                Ok((new, after, drop))
+            });
+            match verdict {
+                Ok((new, after, drop)) => {
+                    accepted = Some((n, new, after, drop));
+                    break;
+                }
+                Err(reason) => rejected.push(Rejected {
+                    effect: c.name().into(),
+                    reason,
+                }),
+            }
+        }
+        let Some((n, new, after, drop)) = accepted else {
+            break;
+        };
+        let c = n.pattern.candidate;
+        let base = new.theta.len() - c.params().len();
+        let mut parameters = BTreeMap::new();
+        let mut std_err = BTreeMap::new();
+        for (j, info) in c.params().iter().enumerate() {
+            // The change time is held during the fit but found by its own scan.
+            let scanned = c == Candidate::PayloadChange && j == 0;
+            if scanned || !new.pinned.contains(&(base + j)) {
+                parameters.insert(info.name.to_owned(), new.theta[base + j]);
+                std_err.insert(info.name.to_owned(), new.std_err[base + j]);
+            }
+        }
+        let channels = channels_of(c, |j| !new.pinned.contains(&(base + j)));
+        findings.push(Finding {
+            effect: c.name().into(),
+            channels,
+            parameters,
+            std_err,
+            evidence: format!(
+                "fingerprint χ²({}) = {:.1}, p = {:.1e}: {}; validation cost −{:.1} %",
+                n.score.dof,
+                n.score.stat,
+                n.p_value,
+                n.pattern.evidence,
+                100.0 * drop
+            ),
+            fit_percent_after: BTreeMap::from([
+                ("v".to_owned(), after.v.fit_percent),
+                ("w".to_owned(), after.w.fit_percent),
+            ]),
+            validation_cost_drop_percent: 100.0 * drop,
+        });
+        cur = new;
+        tried.clear();
+    }
+    bar.set_message("done");
+    bar.finish_and_clear();
+    let final_location = locate::locate(&data.recs, &cur.sim, &data.valid, dt, max_lag);
+    let final_p = final_location.p_values();
+    let left = holm(&final_p, settings.alpha);
+    let unexplained = if mismatch && left.iter().any(|&b| b) {
+        let channels: Vec<usize> = (0..2).filter(|&c| left[2 * c] || left[2 * c + 1]).collect();
+        Some(Unexplained {
+            channels: channels.iter().map(|&c| ["v", "w"][c].to_owned()).collect(),
+            location: channels
+                .iter()
+                .map(|&c| format!("{}: {}", ["v", "ω"][c], final_location.summary(c)))
+                .collect(),
+        })
+    } else {
+        None
+    };
+    let final_stage = stage(&cur);
+    let nominal_sim = simulate_all(
+        &nominal_model,
+        &nominal_fit.theta,
+        &data.recs,
+        &nominal_fit.initial,
+    )
+    .unwrap_or_else(|| cur.sim.clone());
+    let series = data
+        .recs
+        .iter()
+        .enumerate()
+        .map(|(r, rec)| DiagnosisSeries {
+            source: rec.source.clone(),
+            t: rec.t.clone(),
+            validation: data.valid[r].clone(),
+            measured: [rec.v.clone(), rec.w.clone()],
+            nominal: nominal_sim[r].clone(),
+            extended: cur.sim[r].clone(),
+        })
+        .collect();
+    Ok(Diagnosis {
+        nominal,
+        split,
+        tests,
+        mismatch,
+        location,
+        fingerprints: rounds,
+        findings,
+        rejected,
+        unexplained,
+        final_stage,
+        final_location,
+        seconds: clock.elapsed().as_secs_f64(),
+        series,
+    })
+}
