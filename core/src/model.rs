@@ -114,8 +114,9 @@ pub struct Sensitivities {
 /// A model that simulates its outputs from the commands of a recording.
 ///
 /// Implementations: `wheelid_models::WheelPd` and `wheelid_models::VwPd` (Laut 2011 eq. 2.19,
-/// with analytic sensitivities).
-pub trait DynamicModel {
+/// with analytic sensitivities). Models are plain data, shared by the fitters' worker threads
+/// (`Send + Sync`).
+pub trait DynamicModel: Send + Sync {
     /// Model name as used on the command line and in files, e.g. `vw-pd`.
     fn name(&self) -> &str;
 

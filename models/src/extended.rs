@@ -37,6 +37,9 @@ use wheelid_core::{
 use crate::delay::{InputDelay, holding_command, merged_grid};
 use crate::{dynamics, regressor};
 
+/// Shortest time constant θ1/θ4, θ2/θ6 the extended model accepts [s].
+pub const MIN_TIME_CONSTANT: f64 = 1e-3;
+
 /// Smoothing of the Coulomb friction's sign: 2 mm/s and 0.01 rad/s (as the simulator).
 pub const FRICTION_EPS: [f64; 2] = [0.002, 0.01];
 
@@ -239,6 +242,16 @@ impl Extended {
             )));
         }
         let th = dynamics::check_theta(&theta[..6])?;
+        // A time constant below a millisecond is no robot's, and the integrator cannot follow
+        // it: refuse it (a fitter's trial step then counts as failed).
+        for (a, b) in [(th[0], th[3]), (th[1], th[5])] {
+            if b != 0.0 && (a / b).abs() < MIN_TIME_CONSTANT {
+                return Err(Error::InvalidSetting(format!(
+                    "time constant {:.2e} s is below {MIN_TIME_CONSTANT} s",
+                    (a / b).abs()
+                )));
+            }
+        }
         let mut ph = Physics::default();
         let mut i = 6;
         for c in &self.candidates {
@@ -266,6 +279,51 @@ impl Extended {
             return Err(Error::InvalidSetting("wheel ratio must be > −1".into()));
         }
         Ok((th, ph))
+    }
+}
+
+/// [`InputDelay::command_at`] for non-decreasing times, walking the samples instead of
+/// searching them.
+struct CommandCursor<'a> {
+    rec: &'a Recording,
+    hold: (f64, f64),
+    zoh: bool,
+    /// Last j with t_j ≤ the previous query.
+    j: usize,
+}
+
+impl<'a> CommandCursor<'a> {
+    fn new(rec: &'a Recording, hold: (f64, f64)) -> Self {
+        Self {
+            rec,
+            hold,
+            zoh: rec.command_hold() == CommandHold::Zoh,
+            j: 0,
+        }
+    }
+    fn at(&mut self, tau: f64) -> (f64, f64) {
+        let t = &self.rec.t;
+        let n = t.len();
+        if tau < t[0] {
+            return self.hold;
+        }
+        if tau >= t[n - 1] {
+            return (self.rec.v_ref[n - 1], self.rec.w_ref[n - 1]);
+        }
+        if t[self.j] > tau {
+            self.j = t.partition_point(|&x| x <= tau) - 1;
+        }
+        while t[self.j + 1] <= tau {
+            self.j += 1;
+        }
+        let j = self.j;
+        let (v, w) = (&self.rec.v_ref, &self.rec.w_ref);
+        if self.zoh {
+            (v[j], w[j])
+        } else {
+            let a = (tau - t[j]) / (t[j + 1] - t[j]);
+            (v[j] + a * (v[j + 1] - v[j]), w[j] + a * (w[j + 1] - w[j]))
+        }
     }
 }
 
@@ -334,6 +392,8 @@ impl DynamicModel for Extended {
         if ph.accel.is_some() {
             setpoint = [hold.0, hold.1];
         }
+        let fixed_setpoint = zoh && ph.accel.is_none() && ph.drift == 0.0;
+        let mut cursor = CommandCursor::new(rec, hold);
         let m = grid.len();
         let mut y = [Vec::with_capacity(m), Vec::with_capacity(m)];
         let mut s = [v0, w0];
@@ -343,22 +403,22 @@ impl DynamicModel for Extended {
             let (ta, tb) = (grid[i - 1], grid[i]);
             let span = tb - ta;
             let th = theta_at(0.5 * (ta + tb));
-            let ca = InputDelay::command_at(
-                rec,
-                if zoh { 0.5 * (ta + tb) } else { ta } - ph.delay,
-                hold,
-            );
-            let cb = if zoh {
-                ca
-            } else {
-                InputDelay::command_at(rec, tb - ph.delay, hold)
-            };
+            let ca = cursor.at(if zoh { 0.5 * (ta + tb) } else { ta } - ph.delay);
+            let cb = if zoh { ca } else { cursor.at(tb - ph.delay) };
             let rhs_at = |x: &[f64; 2], u: (f64, f64)| rhs(&th, x[0], x[1], [u.0, u.1]);
             let h_max = dynamics::substep(&th);
             let steps = (span / h_max).ceil().max(1.0) as usize;
             let h = span / steps as f64;
             let mut q = [0.0; 2];
-            for j in 0..steps {
+            if fixed_setpoint {
+                // Held command, no rate limit, no drift: one setpoint for the whole interval.
+                let u = shape(target(ca), ta);
+                for _ in 0..steps {
+                    dynamics::rk4_step(rhs_at, &mut s, &mut q, (u[0], u[1]), (u[0], u[1]), h);
+                }
+                setpoint = target(ca);
+            }
+            for j in (0..steps).filter(|_| !fixed_setpoint) {
                 let (f0, f1) = (j as f64 / steps as f64, (j + 1) as f64 / steps as f64);
                 let c_at = |f: f64| (ca.0 + f * (cb.0 - ca.0), ca.1 + f * (cb.1 - ca.1));
                 let (tau0, tau1) = (ta + j as f64 * h, ta + (j + 1) as f64 * h);

@@ -199,6 +199,9 @@ struct Problem<'a, M: ?Sized> {
     last_jacobian: RefCell<Option<(na::DVector<f64>, DMatrix<f64>)>>,
 }
 
+/// One central-difference column: parameter index, step, outputs at +step and −step.
+type FdColumn = (usize, f64, Vec<Vec<f64>>, Vec<Vec<f64>>);
+
 /// Most minimisations: a second (third) one only if the noise weights moved.
 const MAX_PASSES: usize = 3;
 /// Relative change of a channel weight 1/σ_c that calls for another pass.
@@ -272,10 +275,10 @@ impl<M: DynamicModel + ?Sized> Problem<'_, M> {
                     .collect(),
             );
         }
-        // Central differences, step ~ 1e-5 relative (above the integrator's sub-step jitter).
-        let mut out = vec![DMatrix::zeros(n, p + s); s];
+        // Central differences, step ~ 1e-5 relative (above the integrator's sub-step jitter),
+        // the columns shared out over the available cores.
         let scale = theta.iter().fold(0.0f64, |a, x| a.max(x.abs())).max(1e-12);
-        for j in 0..p + s {
+        let column = |j: usize| -> Option<FdColumn> {
             let mut th = theta.to_vec();
             let mut x = x0.to_vec();
             let base = if j < p { th[j] } else { x[j - p] };
@@ -290,6 +293,27 @@ impl<M: DynamicModel + ?Sized> Problem<'_, M> {
             };
             let up = eval(h)?;
             let dn = eval(-h)?;
+            Some((j, h, up, dn))
+        };
+        let workers = std::thread::available_parallelism()
+            .map_or(1, |n| n.get())
+            .clamp(1, p + s);
+        let done: Vec<Option<FdColumn>> = std::thread::scope(|scope| {
+            let handles: Vec<_> = (0..workers)
+                .map(|w| {
+                    let column = &column;
+                    scope.spawn(move || (w..p + s).step_by(workers).map(column).collect::<Vec<_>>())
+                })
+                .collect();
+            // A worker that panicked (inside a model) counts as a failed simulation.
+            handles
+                .into_iter()
+                .flat_map(|h| h.join().unwrap_or_else(|_| vec![None]))
+                .collect()
+        });
+        let mut out = vec![DMatrix::zeros(n, p + s); s];
+        for item in done {
+            let (j, h, up, dn) = item?;
             for c in 0..s {
                 for k in 0..n {
                     out[c][(k, j)] = (up[c][k] - dn[c][k]) / (2.0 * h);

@@ -187,7 +187,7 @@ pub struct Finding {
     pub effect: String,
     /// Channels it acts on.
     pub channels: Vec<String>,
-    /// Its fitted parameters [units of `wheelid_models::Candidate::params`].
+    /// Its parameters in the final model [units of `wheelid_models::Candidate::params`].
     pub parameters: BTreeMap<String, f64>,
     /// Their standard errors.
     pub std_err: BTreeMap<String, f64>,
@@ -277,6 +277,14 @@ pub struct Split {
     /// Seconds held out for validation.
     pub validation_s: f64,
 }
+
+/// Share of its score statistic a fingerprint may keep after its candidate is added and still
+/// count as gone when it stays significant: with two effects present, the other one leaves a
+/// trace along the first one's pattern, so "gone" means at least halved.
+const FINGERPRINT_LEFT: f64 = 0.5;
+
+/// Nominees fitted per round of the forward selection (the strongest by their fingerprint).
+const TRIALS_PER_ROUND: usize = 3;
 
 /// A value far beyond any command: a limit at this level never binds.
 const NEVER: f64 = 1e6;
@@ -471,6 +479,30 @@ fn slew_binding(recs: &[Recording], ch: usize, rate: f64) -> f64 {
         }
     }
     bound as f64 / total.max(1) as f64
+}
+
+/// For a limit (`velocity_saturation`, `acceleration_limit`) at `level` on channel `ch`, the
+/// fraction of the samples where it binds; `None` for other candidates.
+fn limit_binding(recs: &[Recording], c: Candidate, ch: usize, level: f64) -> Option<f64> {
+    match c {
+        Candidate::VelocitySaturation => {
+            let (over, n) = recs
+                .iter()
+                .flat_map(|r| {
+                    if ch == 0 {
+                        r.v_ref.iter()
+                    } else {
+                        r.w_ref.iter()
+                    }
+                })
+                .fold((0usize, 0usize), |(a, n), x| {
+                    (a + usize::from(x.abs() > level), n + 1)
+                });
+            Some(over as f64 / n.max(1) as f64)
+        }
+        Candidate::AccelerationLimit => Some(slew_binding(recs, ch, level)),
+        _ => None,
+    }
 }
 
 /// Null values of a candidate's parameters given θ (the extended model is then the current
@@ -723,22 +755,17 @@ fn fingerprint(
                 | Candidate::Slip
         );
         if two {
-            let mut active: Vec<usize> = pattern
+            // Every channel the pattern reaches is fitted (a friction or a loss only where the
+            // residual asks for a positive one); insignificant ones are dropped after the fit.
+            let active: Vec<usize> = pattern
                 .param_of_col
                 .iter()
-                .zip(&s.z)
-                .filter(|(_, z)| z.abs() >= 2.5)
+                .zip(&s.beta)
+                .filter(|(_, b)| {
+                    !matches!(c, Candidate::CoulombFriction | Candidate::Slip) || **b > 0.0
+                })
                 .map(|(&j, _)| j)
                 .collect();
-            if active.is_empty()
-                && let Some((j, _)) = pattern
-                    .param_of_col
-                    .iter()
-                    .zip(&s.z)
-                    .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
-            {
-                active.push(*j);
-            }
             pattern.inactive = (0..2).filter(|j| !active.contains(j)).collect();
         }
         // First guess: the probe level, or one Gauss–Newton step from the null.
@@ -813,15 +840,16 @@ fn fit_candidate(
         *g = g.clamp(lo + span, hi - span);
     }
     // A friction or a loss that the residual asks to be negative is no such physics.
-    if matches!(c, Candidate::CoulombFriction | Candidate::Slip) {
-        for (j, info) in c.params().iter().enumerate() {
-            if !nominee.pattern.inactive.contains(&j) && nominee.pattern.guess[j] <= 0.0 {
-                return Err(format!(
-                    "its pattern asks for a negative {} ({:.3e})",
-                    info.name, nominee.pattern.guess[j]
-                ));
-            }
-        }
+    if matches!(c, Candidate::CoulombFriction | Candidate::Slip)
+        && nominee.pattern.inactive.len() == 2
+    {
+        return Err(format!(
+            "its pattern asks for negative {} and {} ({:.3e}, {:.3e})",
+            c.params()[0].name,
+            c.params()[1].name,
+            nominee.pattern.guess[0],
+            nominee.pattern.guess[1]
+        ));
     }
     let frame = data.frame();
     let mut theta = cur.theta.clone();
@@ -830,6 +858,41 @@ fn fit_candidate(
         simulate_all(&model, th, &data.recs, &cur.initial)
             .map_or(f64::INFINITY, |y| frame.residuals(&y).norm_squared())
     };
+    // A Gauss–Newton step from the null can overshoot far (a pattern nearly absorbed by θ):
+    // it is shortened to the best of a few fractions by the training cost.
+    if matches!(
+        c,
+        Candidate::CoulombFriction
+            | Candidate::Slip
+            | Candidate::WheelAsymmetry
+            | Candidate::GainDrift
+            | Candidate::PayloadChange
+    ) {
+        let null = null_values(c, &cur.theta, theta[base]);
+        let step: Vec<f64> = (0..null.len())
+            .map(|j| {
+                if nominee.pattern.inactive.contains(&j) {
+                    0.0
+                } else {
+                    theta[base + j] - null[j]
+                }
+            })
+            .collect();
+        let mut best = (f64::INFINITY, 1.0);
+        for frac in [1.0, 0.5, 0.25, 0.1, 0.03, 0.01] {
+            let mut th = theta.clone();
+            for j in 0..null.len() {
+                th[base + j] = null[j] + frac * step[j];
+            }
+            let cost = training_cost(&th);
+            if cost < best.0 {
+                best = (cost, frac);
+            }
+        }
+        for j in 0..null.len() {
+            theta[base + j] = null[j] + best.1 * step[j];
+        }
+    }
     // A dead time is searched on a grid first: its cost has many local minima.
     if c == Candidate::InputDelay {
         let mut best = (f64::INFINITY, guess[0]);
@@ -860,24 +923,24 @@ fn fit_candidate(
     if c == Candidate::PayloadChange {
         pinned.push(base);
     }
-    let run =
-        |theta: &[f64]| -> std::result::Result<(OutputErrorFit, Vec<f64>, Vec<usize>), String> {
-            let restricted = Pinned::new(&model, theta.to_vec(), &pinned);
-            let free_bounds: Vec<(f64, f64)> = restricted.free.iter().map(|&i| bounds[i]).collect();
-            let oe = OutputError {
-                bounds: Some(free_bounds),
-                mask: Some(data.train.clone()),
-                patience: 10,
-                tolerance: 1e-8,
-                ..OutputError::default()
-            };
-            let fit = oe
-                .fit(&restricted, &data.recs, &restricted.free_values())
-                .map_err(|e| format!("the fit failed: {e}"))?;
-            let full = restricted.expand(&fit.theta);
-            Ok((fit, full, restricted.free))
+    type Run = (OutputErrorFit, Vec<f64>, Vec<usize>);
+    let run = |theta: &[f64], pinned: &[usize]| -> std::result::Result<Run, String> {
+        let restricted = Pinned::new(&model, theta.to_vec(), pinned);
+        let free_bounds: Vec<(f64, f64)> = restricted.free.iter().map(|&i| bounds[i]).collect();
+        let oe = OutputError {
+            bounds: Some(free_bounds),
+            mask: Some(data.train.clone()),
+            patience: 10,
+            tolerance: 1e-8,
+            ..OutputError::default()
         };
-    let (mut fit, mut full, mut free) = run(&theta)?;
+        let fit = oe
+            .fit(&restricted, &data.recs, &restricted.free_values())
+            .map_err(|e| format!("the fit failed: {e}"))?;
+        let full = restricted.expand(&fit.theta);
+        Ok((fit, full, restricted.free))
+    };
+    let (mut fit, mut full, mut free) = run(&theta, &pinned)?;
     let mut time_resolution = 0.0;
     if c == Candidate::PayloadChange {
         let step = (t_hi - t_lo) / (nominee.pattern.grid + 1) as f64;
@@ -903,7 +966,41 @@ fn fit_candidate(
         if (t_best - t0).abs() > 1e-9 {
             let mut th = full.clone();
             th[base] = t_best;
-            (fit, full, free) = run(&th)?;
+            (fit, full, free) = run(&th, &pinned)?;
+        }
+    }
+    // A two-channel candidate keeps only the channels where it is significant.
+    if matches!(
+        c,
+        Candidate::AccelerationLimit
+            | Candidate::VelocitySaturation
+            | Candidate::CoulombFriction
+            | Candidate::Slip
+    ) {
+        // The weakest channel is dropped while more than one is fitted and one is weak (a
+        // parameter that another absorbs, e.g. a turning loss |v|·ω that θ5 v·ω stands for when
+        // v keeps its sign, also blurs its partner).
+        loop {
+            let z: Vec<(usize, f64)> = (0..2)
+                .filter_map(|j| {
+                    let a = free.iter().position(|&i| i == base + j)?;
+                    let (x, se) = (full[base + j], fit.std_err[a]);
+                    // A limit that hardly binds counts as weak whatever its interval.
+                    let idle = limit_binding(&data.recs, c, j, x).is_some_and(|f| f < 0.01);
+                    Some((j, if se > 0.0 && !idle { x.abs() / se } else { 0.0 }))
+                })
+                .collect();
+            let Some(&(j, zmin)) = z.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
+                break;
+            };
+            if z.len() < 2 || zmin >= 3.0 {
+                break;
+            }
+            // From the start again: the weak pair may have wandered along their valley.
+            let mut th = theta.clone();
+            pinned.push(base + j);
+            th[base + j] = null_values(c, &cur.theta, 0.0)[j];
+            (fit, full, free) = run(&th, &pinned)?;
         }
     }
     let p = full.len();
@@ -988,23 +1085,7 @@ fn check_candidate(data: &Data, new: &Current, c: Candidate) -> std::result::Res
             Candidate::VelocitySaturation | Candidate::AccelerationLimit => {
                 let s = se[base + j];
                 let rel = if x > 0.0 { s / x } else { f64::INFINITY };
-                // How often the limit binds.
-                let frac = if c == Candidate::VelocitySaturation {
-                    let u = data.recs.iter().flat_map(|r| {
-                        if j == 0 {
-                            r.v_ref.iter()
-                        } else {
-                            r.w_ref.iter()
-                        }
-                        .copied()
-                    });
-                    let (over, n) = u.fold((0usize, 0usize), |(a, n), x| {
-                        (a + usize::from(x.abs() > th[base + j]), n + 1)
-                    });
-                    over as f64 / n.max(1) as f64
-                } else {
-                    slew_binding(&data.recs, j, th[base + j])
-                };
+                let frac = limit_binding(&data.recs, c, j, th[base + j]).unwrap_or(1.0);
                 if rel.is_nan() || rel >= 1.0 / 3.0 {
                     Some(format!(
                         "{} = {x:.4} ± {s:.4} is not significant",
@@ -1145,7 +1226,14 @@ pub fn diagnose(
         mask: Some(train.clone()),
         ..OutputError::default()
     };
-    let nominal_fit = oe.fit(model, &recs, &ls.theta)?;
+    // Least squares can come out unphysical (a long dead time makes the regression's θ1
+    // negative); then output error starts from unit gains and a time constant of 3 periods.
+    let fallback = [3.0 * dt, 3.0 * dt, 0.0, 1.0, 0.0, 1.0];
+    let sane = [0, 1, 3, 5].iter().all(|&i| ls.theta[i] > 0.0);
+    let nominal_fit = match oe.fit(model, &recs, if sane { &ls.theta } else { &fallback }) {
+        Err(_) if sane => oe.fit(model, &recs, &fallback)?,
+        other => other?,
+    };
     let track = settings
         .track_m
         .or_else(|| recs.iter().find_map(track_from_meta));
@@ -1241,10 +1329,20 @@ pub fn diagnose(
             .copied()
             .filter(|c| !cur.candidates.contains(c) && !tried.contains(c))
             .collect();
-        let nominees: Vec<Nominee> = pending
-            .iter()
-            .filter_map(|&c| fingerprint(c, &data, &cur, &q, &e))
-            .collect();
+        // One thread per candidate: each fingerprint is a handful of simulations.
+        let nominees: Vec<Nominee> = std::thread::scope(|scope| {
+            let handles: Vec<_> = pending
+                .iter()
+                .map(|&c| {
+                    let (data, cur, q, e) = (&data, &cur, &q, &e);
+                    scope.spawn(move || fingerprint(c, data, cur, q, e))
+                })
+                .collect();
+            handles
+                .into_iter()
+                .filter_map(|h| h.join().ok().flatten())
+                .collect()
+        });
         // The family: residual–command independence (validation) and the fingerprints.
         let here = if round == 0 {
             location.clone()
@@ -1309,8 +1407,10 @@ pub fn diagnose(
         bar.set_length(bar.position() + order.len() as u64 + 1);
         let (_, cost_before) = data.validate(&cur.sim);
         let before = data.validate(&cur.sim).0;
-        let mut accepted = None;
-        for i in order {
+        // Best first among the strongest nominees: each is fitted and judged; of those kept,
+        // the one that lowers the validation cost most is added.
+        let mut accepted: Option<(&Nominee, Current, Channels, f64)> = None;
+        for i in order.into_iter().take(TRIALS_PER_ROUND) {
             let n = &nominees[i];
             let c = n.pattern.candidate;
             bar.set_message(format!("fitting {}", c.name()));
@@ -1339,20 +1439,42 @@ pub fn diagnose(
                 check_candidate(&data, &new, c)?;
                 // The fingerprint must be gone from the new residual.
                 let e_new = frame.residuals(&new.sim);
-                if let Some(s) = score::score(&frame, &q, &n.pattern.s, &e_new, data.hac_lags())
+                // Gone: no longer significant, or at least halved (another effect still
+                // present may leave a trace along it).
+                // Judged net of the other nominees' patterns: with two effects present, the
+                // other one leaves a trace along this one's pattern.
+                let others: Vec<&DMatrix<f64>> = nominees
+                    .iter()
+                    .zip(&nominated)
+                    .filter(|(m, d)| **d && m.pattern.candidate != c)
+                    .map(|(m, _)| &m.pattern.s)
+                    .collect();
+                let q_net = if others.is_empty() {
+                    q.clone()
+                } else {
+                    let mut cols: Vec<nalgebra::DVector<f64>> =
+                        j.column_iter().map(|x| x.into_owned()).collect();
+                    for m in others {
+                        cols.extend(m.column_iter().map(|x| x.into_owned()));
+                    }
+                    score::basis(&DMatrix::from_columns(&cols))
+                };
+                if let Some(s) = score::score(&frame, &q_net, &n.pattern.s, &e_new, data.hac_lags())
                     && s.p_value * (n.pattern.grid as f64) < settings.alpha
+                    && s.stat > FINGERPRINT_LEFT * n.score.stat
                 {
                     return Err(format!(
-                        "its fingerprint stays (χ²({}) = {:.1}, p = {:.1e})",
-                        s.dof, s.stat, s.p_value
+                        "its fingerprint stays (χ²({}) = {:.1} of {:.1}, p = {:.1e})",
+                        s.dof, s.stat, n.score.stat, s.p_value
                     ));
                 }
                 Ok((new, after, drop))
             });
             match verdict {
                 Ok((new, after, drop)) => {
-                    accepted = Some((n, new, after, drop));
-                    break;
+                    if accepted.as_ref().is_none_or(|a| drop > a.3) {
+                        accepted = Some((n, new, after, drop));
+                    }
                 }
                 Err(reason) => rejected.push(Rejected {
                     effect: c.name().into(),
@@ -1400,7 +1522,28 @@ pub fn diagnose(
     }
     bar.set_message("done");
     bar.finish_and_clear();
-    let final_location = locate::locate(&data.recs, &cur.sim, &data.valid, dt, max_lag);
+    // Every finding's parameters as the final model has them (the later fits refit them all).
+    let mut at = 6;
+    for c in &cur.candidates {
+        if let Some(f) = findings.iter_mut().find(|f| f.effect == c.name()) {
+            for (j, info) in c.params().iter().enumerate() {
+                if let Some(v) = f.parameters.get_mut(info.name) {
+                    *v = cur.theta[at + j];
+                }
+                if let Some(v) = f.std_err.get_mut(info.name)
+                    && !(*c == Candidate::PayloadChange && j == 0)
+                {
+                    *v = cur.std_err[at + j];
+                }
+            }
+        }
+        at += c.params().len();
+    }
+    let final_location = if findings.is_empty() {
+        location.clone()
+    } else {
+        locate::locate(&data.recs, &cur.sim, &data.valid, dt, max_lag)
+    };
     let final_p = final_location.p_values();
     let left = holm(&final_p, settings.alpha);
     let unexplained = if mismatch && left.iter().any(|&b| b) {

@@ -181,8 +181,6 @@ pub(crate) struct Score {
     pub p_value: f64,
     /// One Gauss–Newton step per column.
     pub beta: Vec<f64>,
-    /// β̂ over its robust standard error, per column.
-    pub z: Vec<f64>,
 }
 
 /// The score test of the pattern columns `s` (rows as `frame`) against weighted residuals `e`,
@@ -230,13 +228,9 @@ pub(crate) fn score(
     let stat = (g_total.transpose() * &meat_inv * &g_total)[(0, 0)].max(0.0);
     let bread = (sp.transpose() * &sp).pseudo_inverse(1e-14).ok()?;
     let beta_kept = &bread * &g_total;
-    let cov = &bread * &meat * &bread;
     let mut beta = vec![0.0; s.ncols()];
-    let mut z = vec![0.0; s.ncols()];
     for (a, &j) in keep.iter().enumerate() {
         beta[j] = beta_kept[a];
-        let sd = cov[(a, a)].max(0.0).sqrt();
-        z[j] = if sd > 0.0 { beta_kept[a] / sd } else { 0.0 };
     }
     let p_value = ChiSquared::new(k as f64).map_or(1.0, |d| d.sf(stat));
     Some(Score {
@@ -244,6 +238,5 @@ pub(crate) fn score(
         dof: k,
         p_value,
         beta,
-        z,
     })
 }
