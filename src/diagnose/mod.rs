@@ -283,9 +283,6 @@ pub struct Split {
 /// trace along the first one's pattern, so "gone" means at least halved.
 const FINGERPRINT_LEFT: f64 = 0.5;
 
-/// Nominees fitted per round of the forward selection (the strongest by their fingerprint).
-const TRIALS_PER_ROUND: usize = 3;
-
 /// A value far beyond any command: a limit at this level never binds.
 const NEVER: f64 = 1e6;
 
@@ -412,6 +409,20 @@ impl Data {
             },
             cost,
         )
+    }
+    /// Earliest and latest time over the recordings [s].
+    fn span(&self) -> (f64, f64) {
+        let lo = self
+            .recs
+            .iter()
+            .map(|r| r.t[0])
+            .fold(f64::INFINITY, f64::min);
+        let hi = self
+            .recs
+            .iter()
+            .map(|r| r.t[r.len() - 1])
+            .fold(f64::NEG_INFINITY, f64::max);
+        (lo, hi)
     }
     fn max_lag(&self, settings: &DiagnoseSettings) -> usize {
         let shortest = self
@@ -664,22 +675,26 @@ fn patterns(c: Candidate, data: &Data, cur: &Current) -> Option<Vec<Pattern>> {
                     let u: Vec<f64> = cmd(ch).collect();
                     let over = u.iter().filter(|x| x.abs() > 1.05 * level).count() as f64
                         / u.len().max(1) as f64;
-                    words.push(format!(
-                        "|{name}| stays within {y:.3} while the command exceeds the matching \
-                         setpoint {level:.3} on {:.1} % of the samples",
-                        100.0 * over
-                    ));
+                    if over >= 0.01 {
+                        words.push(format!(
+                            "|{name}| stays within {y:.3} while the command exceeds the \
+                             matching setpoint {level:.3} on {:.1} % of the samples",
+                            100.0 * over
+                        ));
+                    }
                     (level, over >= 0.01)
                 } else {
                     let acc = data.accel.iter().flat_map(|a| a[ch].iter().copied());
                     let a = abs_quantile(acc, 0.995);
                     let level = gain[ch].abs() * a;
                     let over = slew_binding(&data.recs, ch, level);
-                    words.push(format!(
-                        "{name}'s measured acceleration tops out at {a:.3} while the commands \
-                         step faster on {:.1} % of the samples",
-                        100.0 * over
-                    ));
+                    if over >= 0.01 {
+                        words.push(format!(
+                            "{name}'s measured acceleration tops out at {a:.3} while the \
+                             commands step faster on {:.1} % of the samples",
+                            100.0 * over
+                        ));
+                    }
                     (level, over >= 0.01)
                 };
                 if binding && level > 0.0 {
@@ -807,27 +822,30 @@ fn channels_of(c: Candidate, active: impl Fn(usize) -> bool) -> Vec<String> {
 
 /// Fits the current model plus `nominee` on the training blocks; returns the new state and
 /// the fit.
-fn fit_candidate(
+/// Where a candidate's fit starts: θ, bounds, held parameters, and the training cost there
+/// (the screen that orders the fits).
+struct Start {
+    theta: Vec<f64>,
+    bounds: Vec<(f64, f64)>,
+    pinned: Vec<usize>,
+    cost: f64,
+}
+
+/// The start of `nominee`'s fit from its fingerprint's guess: dead times by a grid, Gauss–
+/// Newton steps shortened by a line search, inactive channels held at their null. `Err` if the
+/// guess is no such physics.
+fn start_candidate(
     data: &Data,
     cur: &Current,
     nominee: &Nominee,
-) -> std::result::Result<(Current, OutputErrorFit), String> {
+) -> std::result::Result<Start, String> {
     let c = nominee.pattern.candidate;
     let mut cands = cur.candidates.clone();
     cands.push(c);
     let model = data.model(&cands);
     let base = cur.theta.len();
     let mut guess = nominee.pattern.guess.clone();
-    let t_lo = data
-        .recs
-        .iter()
-        .map(|r| r.t[0])
-        .fold(f64::INFINITY, f64::min);
-    let t_hi = data
-        .recs
-        .iter()
-        .map(|r| r.t[r.len() - 1])
-        .fold(f64::NEG_INFINITY, f64::max);
+    let (t_lo, t_hi) = data.span();
     let margin = 0.05 * (t_hi - t_lo);
     let mut bounds: Vec<(f64, f64)> = vec![(f64::NEG_INFINITY, f64::INFINITY); base];
     let cb = candidate_bounds(c, (t_lo + margin, t_hi - margin));
@@ -893,6 +911,31 @@ fn fit_candidate(
             theta[base + j] = null[j] + best.1 * step[j];
         }
     }
+    // A limit's probe level is a rough reading of the data: scaled on a grid first.
+    if matches!(
+        c,
+        Candidate::VelocitySaturation | Candidate::AccelerationLimit
+    ) {
+        let probe = theta.clone();
+        let mut best = (training_cost(&probe), 1.0);
+        for f in [0.5, 0.7, 0.85, 1.2, 1.5, 2.0] {
+            let mut th = probe.clone();
+            for j in 0..2 {
+                if !nominee.pattern.inactive.contains(&j) && th[base + j] < NEVER {
+                    th[base + j] *= f;
+                }
+            }
+            let cost = training_cost(&th);
+            if cost < best.0 {
+                best = (cost, f);
+            }
+        }
+        for j in 0..2 {
+            if probe[base + j] < NEVER {
+                theta[base + j] = probe[base + j] * best.1;
+            }
+        }
+    }
     // A dead time is searched on a grid first: its cost has many local minima.
     if c == Candidate::InputDelay {
         let mut best = (f64::INFINITY, guess[0]);
@@ -923,6 +966,37 @@ fn fit_candidate(
     if c == Candidate::PayloadChange {
         pinned.push(base);
     }
+    let cost = training_cost(&theta);
+    Ok(Start {
+        theta,
+        bounds,
+        pinned,
+        cost,
+    })
+}
+
+/// Fits the current model plus `nominee` on the training blocks from `start`; returns the new
+/// state and the fit.
+fn fit_candidate(
+    data: &Data,
+    cur: &Current,
+    nominee: &Nominee,
+    start: Start,
+) -> std::result::Result<(Current, OutputErrorFit), String> {
+    let c = nominee.pattern.candidate;
+    let mut cands = cur.candidates.clone();
+    cands.push(c);
+    let model = data.model(&cands);
+    let base = cur.theta.len();
+    let Start {
+        theta,
+        bounds,
+        mut pinned,
+        ..
+    } = start;
+    let frame = data.frame();
+    let (t_lo, t_hi) = data.span();
+    let margin = 0.05 * (t_hi - t_lo);
     type Run = (OutputErrorFit, Vec<f64>, Vec<usize>);
     let run = |theta: &[f64], pinned: &[usize]| -> std::result::Result<Run, String> {
         let restricted = Pinned::new(&model, theta.to_vec(), pinned);
@@ -931,7 +1005,7 @@ fn fit_candidate(
             bounds: Some(free_bounds),
             mask: Some(data.train.clone()),
             patience: 10,
-            tolerance: 1e-8,
+            tolerance: 1e-6,
             ..OutputError::default()
         };
         let fit = oe
@@ -1030,6 +1104,64 @@ fn fit_candidate(
         },
         fit,
     ))
+}
+
+/// The current model without its `k`-th candidate, refitted on the training blocks.
+fn remove_candidate(data: &Data, cur: &Current, k: usize) -> std::result::Result<Current, String> {
+    let offset = 6 + cur.candidates[..k]
+        .iter()
+        .map(|c| c.params().len())
+        .sum::<usize>();
+    let len = cur.candidates[k].params().len();
+    let mut cands = cur.candidates.clone();
+    cands.remove(k);
+    let mut theta = cur.theta.clone();
+    theta.drain(offset..offset + len);
+    let pinned: Vec<usize> = cur
+        .pinned
+        .iter()
+        .filter(|&&i| i < offset || i >= offset + len)
+        .map(|&i| if i >= offset { i - len } else { i })
+        .collect();
+    let (t_lo, t_hi) = data.span();
+    let margin = 0.05 * (t_hi - t_lo);
+    let mut bounds = vec![(f64::NEG_INFINITY, f64::INFINITY); 6];
+    for c in &cands {
+        bounds.extend(candidate_bounds(*c, (t_lo + margin, t_hi - margin)));
+    }
+    let model = data.model(&cands);
+    let restricted = Pinned::new(&model, theta, &pinned);
+    let oe = OutputError {
+        bounds: Some(restricted.free.iter().map(|&i| bounds[i]).collect()),
+        mask: Some(data.train.clone()),
+        patience: 10,
+        tolerance: 1e-6,
+        ..OutputError::default()
+    };
+    let fit = oe
+        .fit(&restricted, &data.recs, &restricted.free_values())
+        .map_err(|e| e.to_string())?;
+    let full = restricted.expand(&fit.theta);
+    let p = full.len();
+    let mut std_err = vec![0.0; p];
+    let mut covariance = DMatrix::zeros(p, p);
+    for (a, &i) in restricted.free.iter().enumerate() {
+        std_err[i] = fit.std_err[a];
+        for (b, &j) in restricted.free.iter().enumerate() {
+            covariance[(i, j)] = fit.covariance[(a, b)];
+        }
+    }
+    let sim = simulate_all(&model, &full, &data.recs, &fit.initial)
+        .ok_or("the model does not simulate")?;
+    Ok(Current {
+        candidates: cands,
+        pinned,
+        theta: full,
+        std_err,
+        covariance,
+        initial: fit.initial,
+        sim,
+    })
 }
 
 /// Significance and plausibility of a fitted candidate; `Err` says why not.
@@ -1407,16 +1539,37 @@ pub fn diagnose(
         bar.set_length(bar.position() + order.len() as u64 + 1);
         let (_, cost_before) = data.validate(&cur.sim);
         let before = data.validate(&cur.sim).0;
-        // Best first among the strongest nominees: each is fitted and judged; of those kept,
-        // the one that lowers the validation cost most is added.
+        // Screen: every nominee's start (cheap), in parallel; then fit them in the order of
+        // their training cost there, and add the first that passes.
+        let starts: Vec<(usize, std::result::Result<Start, String>)> = std::thread::scope(|sc| {
+            let handles: Vec<_> = order
+                .iter()
+                .map(|&i| {
+                    let (data, cur, n) = (&data, &cur, &nominees[i]);
+                    sc.spawn(move || (i, start_candidate(data, cur, n)))
+                })
+                .collect();
+            handles.into_iter().filter_map(|h| h.join().ok()).collect()
+        });
+        let mut ready = Vec::new();
+        for (i, st) in starts {
+            tried.push(nominees[i].pattern.candidate);
+            match st {
+                Ok(st) => ready.push((i, st)),
+                Err(reason) => rejected.push(Rejected {
+                    effect: nominees[i].pattern.candidate.name().into(),
+                    reason,
+                }),
+            }
+        }
+        ready.sort_by(|a, b| a.1.cost.total_cmp(&b.1.cost));
         let mut accepted: Option<(&Nominee, Current, Channels, f64)> = None;
-        for i in order.into_iter().take(TRIALS_PER_ROUND) {
+        for (i, st) in ready {
             let n = &nominees[i];
             let c = n.pattern.candidate;
             bar.set_message(format!("fitting {}", c.name()));
             bar.inc(1);
-            tried.push(c);
-            let verdict = fit_candidate(&data, &cur, n).and_then(|(new, _)| {
+            let verdict = fit_candidate(&data, &cur, n, st).and_then(|(new, _)| {
                 let (after, cost) = data.validate(&new.sim);
                 let drop = 1.0 - cost / cost_before;
                 if drop < settings.min_improvement {
@@ -1472,9 +1625,8 @@ pub fn diagnose(
             });
             match verdict {
                 Ok((new, after, drop)) => {
-                    if accepted.as_ref().is_none_or(|a| drop > a.3) {
-                        accepted = Some((n, new, after, drop));
-                    }
+                    accepted = Some((n, new, after, drop));
+                    break;
                 }
                 Err(reason) => rejected.push(Rejected {
                     effect: c.name().into(),
@@ -1519,6 +1671,32 @@ pub fn diagnose(
         });
         cur = new;
         tried.clear();
+        // Backward step: an effect added earlier that the new one makes redundant goes.
+        if cur.candidates.len() >= 2 {
+            let (_, cost_with) = data.validate(&cur.sim);
+            for k in (0..cur.candidates.len() - 1).rev() {
+                let Ok(without) = remove_candidate(&data, &cur, k) else {
+                    continue;
+                };
+                let (_, cost_without) = data.validate(&without.sim);
+                let rise = cost_without / cost_with - 1.0;
+                if rise < settings.min_improvement {
+                    let name = cur.candidates[k].name();
+                    findings.retain(|f| f.effect != name);
+                    rejected.push(Rejected {
+                        effect: name.into(),
+                        reason: format!(
+                            "redundant once {} is in: without it the validation cost rises by \
+                             {:.1} % only",
+                            c.name(),
+                            100.0 * rise
+                        ),
+                    });
+                    cur = without;
+                    break;
+                }
+            }
+        }
     }
     bar.set_message("done");
     bar.finish_and_clear();
