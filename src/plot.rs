@@ -480,36 +480,41 @@ pub fn write_diagnosis_plots(d: &Diagnosis, dir: &Path) -> Result<Vec<PathBuf>> 
                 .chain(names.iter().map(|n| after_of(n)))
                 .fold(1.0f64, f64::max)
                 * 1.1;
+            // Horizontal bars, two rows per region (nominal, then final), names on the left.
+            let rows = 2 * names.len() as i32;
             let mut chart = ChartBuilder::on(&cells[ch])
                 .caption(
                     format!(
-                        "{}: residual RMS by region / nominal RMS overall",
+                        "{}: residual RMS by region / nominal RMS overall (orange: nominal, red: final)",
                         labels[ch].1
                     ),
-                    ("sans-serif", 18),
+                    ("sans-serif", 16),
                 )
                 .margin(8)
-                .x_label_area_size(90)
-                .y_label_area_size(55)
-                .build_cartesian_2d(0.0..names.len() as f64, 0.0..top)?;
+                .x_label_area_size(35)
+                .y_label_area_size(170)
+                .build_cartesian_2d(0.0..top, 0..rows.max(1))?;
             chart
                 .configure_mesh()
-                .disable_x_mesh()
-                .x_labels(names.len().max(1))
-                .x_label_formatter(&|x| {
-                    let i = x.floor() as usize;
-                    names.get(i).cloned().unwrap_or_default()
+                .disable_y_mesh()
+                .y_labels(rows.max(1) as usize + 1)
+                .y_label_formatter(&|y| {
+                    if y % 2 == 1 {
+                        names.get((y / 2) as usize).cloned().unwrap_or_default()
+                    } else {
+                        String::new()
+                    }
                 })
-                .y_desc("RMS ratio")
+                .x_desc("RMS ratio")
                 .draw()?;
             for (i, r) in before.iter().enumerate() {
-                let x = i as f64;
+                let y = 2 * i as i32;
                 chart.draw_series(std::iter::once(Rectangle::new(
-                    [(x + 0.1, 0.0), (x + 0.5, r.rms_ratio)],
+                    [(0.0, y), (r.rms_ratio, y + 1)],
                     RGBColor(230, 120, 0).filled(),
                 )))?;
                 chart.draw_series(std::iter::once(Rectangle::new(
-                    [(x + 0.5, 0.0), (x + 0.9, after_of(&r.name))],
+                    [(0.0, y + 1), (after_of(&r.name), y + 2)],
                     RGBColor(200, 0, 0).filled(),
                 )))?;
             }

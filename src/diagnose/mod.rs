@@ -1014,7 +1014,36 @@ fn fit_candidate(
         let full = restricted.expand(&fit.theta);
         Ok((fit, full, restricted.free))
     };
-    let (mut fit, mut full, mut free) = run(&theta, &pinned)?;
+    let two = matches!(
+        c,
+        Candidate::AccelerationLimit
+            | Candidate::VelocitySaturation
+            | Candidate::CoulombFriction
+            | Candidate::Slip
+    );
+    let both_free = (0..2).all(|j| !pinned.contains(&(base + j)));
+    let (mut fit, mut full, mut free) = match run(&theta, &pinned) {
+        Ok(r) => r,
+        // Both channels cannot be told apart (one never acts): each alone, the better kept.
+        Err(first) if two && both_free => {
+            let mut best: Option<(Run, Vec<usize>)> = None;
+            for j in 0..2 {
+                let mut p = pinned.clone();
+                p.push(base + j);
+                let mut th = theta.clone();
+                th[base + j] = null_values(c, &cur.theta, 0.0)[j];
+                if let Ok(r) = run(&th, &p)
+                    && best.as_ref().is_none_or(|b| r.0.cost < b.0.0.cost)
+                {
+                    best = Some((r, p));
+                }
+            }
+            let (r, p) = best.ok_or(first)?;
+            pinned = p;
+            r
+        }
+        Err(e) => return Err(e),
+    };
     let mut time_resolution = 0.0;
     if c == Candidate::PayloadChange {
         let step = (t_hi - t_lo) / (nominee.pattern.grid + 1) as f64;
@@ -1044,13 +1073,7 @@ fn fit_candidate(
         }
     }
     // A two-channel candidate keeps only the channels where it is significant.
-    if matches!(
-        c,
-        Candidate::AccelerationLimit
-            | Candidate::VelocitySaturation
-            | Candidate::CoulombFriction
-            | Candidate::Slip
-    ) {
+    if two {
         // The weakest channel is dropped while more than one is fitted and one is weak (a
         // parameter that another absorbs, e.g. a turning loss |v|·ω that θ5 v·ω stands for when
         // v keeps its sign, also blurs its partner).
