@@ -364,3 +364,83 @@ fn bad_simulate_and_track_configs_name_file_line_and_column() {
     assert!(!o.status.success());
     assert!(stderr(&o).contains("input_delay.delay_s"), "{}", stderr(&o));
 }
+
+#[test]
+fn diagnose_json_has_the_issue_shape_and_finds_a_concealed_dead_time() {
+    let dir = tempfile::tempdir().expect("tmp");
+    let cfg = write(
+        dir.path(),
+        "sim.toml",
+        "robot = \"pioneer3dx\"\n[excitation]\ntype = \"random_multisine\"\nseed = 4\n\
+         v_offset = 0.35\nv_amp = 0.35\nw_amp = 1.3\nf_max_hz = 2.0\n[simulation]\n\
+         duration_s = 240.0\nseed = 4\n[simulation.effects.input_delay]\ndelay_s = 0.2\n",
+    );
+    let csv = dir.path().join("delayed.csv");
+    let csv = csv.to_str().expect("utf8");
+    let o = wheelid(&["simulate", "--config", &cfg, "-o", csv]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = wheelid(&["diagnose", csv, "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("stdout is JSON only");
+    assert_eq!(v["nominal"]["theta"].as_array().map(Vec::len), Some(6));
+    for stage in ["nominal", "final"] {
+        for ch in ["v", "w"] {
+            assert!(
+                v[stage]["channels"][ch]["fit_percent"].as_f64().is_some(),
+                "{stage} {ch}"
+            );
+        }
+    }
+    let f = &v["findings"][0];
+    assert_eq!(f["effect"], "input_delay");
+    assert_eq!(f["channels"], serde_json::json!(["v", "w"]));
+    let d = f["parameters"]["delay_s"].as_f64().expect("delay_s");
+    assert!((d - 0.2).abs() < 0.01, "{d}");
+    assert!(f["evidence"].as_str().is_some_and(|e| !e.is_empty()));
+    let after = f["fit_percent_after"]["w"].as_f64().expect("after");
+    let before = v["nominal"]["channels"]["w"]["fit_percent"]
+        .as_f64()
+        .expect("before");
+    assert!(after > before + 10.0, "{before} → {after}");
+}
+
+#[test]
+fn diagnose_config_runs_and_a_misspelled_key_names_its_line() {
+    let dir = tempfile::tempdir().expect("tmp");
+    let csv = dir.path().join("clean.csv");
+    let o = wheelid(&[
+        "simulate",
+        "--excitation",
+        "multisine",
+        "--duration",
+        "120",
+        "-o",
+        csv.to_str().expect("utf8"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let cfg = write(
+        dir.path(),
+        "d.toml",
+        "files = [\"clean.csv\"]\ncandidates = [\"input_delay\", \"slip\"]\nmax_effects = 2\n",
+    );
+    let o = wheelid(&["diagnose", "--config", &cfg]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("no mismatch"), "{text}");
+    let bad = write(
+        dir.path(),
+        "bad.toml",
+        "files = [\"clean.csv\"]\nmax_efects = 2\n",
+    );
+    let o = wheelid(&["diagnose", "--config", &bad]);
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert!(
+        e.contains("bad.toml") && e.contains("line 2") && e.contains("max_efects"),
+        "{e}"
+    );
+    let bad = write(dir.path(), "bad2.toml", "candidates = [\"wobble\"]\n");
+    let o = wheelid(&["diagnose", "--config", &bad]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("line 1"), "{}", stderr(&o));
+}
