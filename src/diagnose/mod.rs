@@ -25,7 +25,11 @@
 //!    [`DiagnoseSettings::min_improvement`] with no channel's validation fit falling by more
 //!    than a point, its parameters are significant (≥ 3 standard errors from the null; a limit
 //!    must bind on ≥ 1 % of the samples) and physically plausible, and its fingerprint is gone
-//!    (the pattern that nominated it no longer fits the new residual). Then the search starts
+//!    (the pattern that nominated it, net of the other nominees, no longer fits the new
+//!    residual or is at least halved — for an effect smooth in its parameter this nearly
+//!    follows from the fit; it bites for the limits, whose pattern is a probe at a level read
+//!    off the data, and for a candidate standing in for another effect; the validation cost
+//!    is the main guard). Then the search starts
 //!    again from the extended model (forward selection, at most
 //!    [`DiagnoseSettings::max_effects`]). What stays significant is reported as
 //!    [`Unexplained`], with where it lives;
@@ -283,6 +287,9 @@ pub struct Split {
 /// trace along the first one's pattern, so "gone" means at least halved.
 const FINGERPRINT_LEFT: f64 = 0.5;
 
+/// Most blocks a recording is cut into.
+const MAX_BLOCKS: usize = 50;
+
 /// A value far beyond any command: a limit at this level never binds.
 const NEVER: f64 = 1e6;
 
@@ -353,6 +360,8 @@ struct Data {
     /// Validation flags.
     valid: Vec<Vec<bool>>,
     dt: f64,
+    /// Blocks per recording.
+    blocks: usize,
     track: Option<f64>,
     /// 1/σ_c of the nominal fit.
     weight: [f64; 2],
@@ -424,18 +433,27 @@ impl Data {
             .fold(f64::NEG_INFINITY, f64::max);
         (lo, hi)
     }
-    fn max_lag(&self, settings: &DiagnoseSettings) -> usize {
-        let shortest = self
-            .valid
+    /// Shortest block [samples].
+    fn block(&self) -> usize {
+        self.recs
             .iter()
-            .map(|m| m.iter().filter(|&&b| b).count())
-            .sum::<usize>();
-        ((settings.max_lag_s / self.dt).round() as usize).clamp(1, (shortest / 10).max(1))
+            .map(|r| r.len() / self.blocks)
+            .min()
+            .unwrap_or(1)
+            .max(1)
     }
-    /// Newey–West lag count of the score tests.
+    /// Lags of the correlation tests: `max_lag_s`, at most half a block.
+    fn max_lag(&self, settings: &DiagnoseSettings) -> usize {
+        ((settings.max_lag_s / self.dt).round() as usize).clamp(1, (self.block() / 2).max(1))
+    }
+    /// Lag window of the fingerprints' long-run variance: the Newey–West rule, but at least a
+    /// second (free-run residuals stay correlated over the robot's time constants and
+    /// longer), at most a quarter block.
     fn hac_lags(&self) -> usize {
         let n = self.recs.iter().map(Recording::len).max().unwrap_or(0);
-        (4.0 * (n as f64 / 100.0).powf(2.0 / 9.0)).floor() as usize
+        let rule = (4.0 * (n as f64 / 100.0).powf(2.0 / 9.0)).floor() as usize;
+        rule.max((1.0 / self.dt).round() as usize)
+            .min((self.block() / 4).max(1))
     }
 }
 
@@ -452,9 +470,11 @@ fn abs_quantile(x: impl Iterator<Item = f64>, q: f64) -> f64 {
 /// The wheel track from the metadata: `track`, a `kinematics` line with `track X`, or the
 /// built-in profile named by `robot`.
 fn track_from_meta(rec: &Recording) -> Option<f64> {
+    let valid = |x: f64| (x.is_finite() && x > 0.0).then_some(x);
     if let Some(t) = rec
         .meta("track")
         .and_then(|s| s.split_whitespace().next()?.parse().ok())
+        .and_then(valid)
     {
         return Some(t);
     }
@@ -462,7 +482,10 @@ fn track_from_meta(rec: &Recording) -> Option<f64> {
         let mut it = k.split_whitespace();
         while let Some(w) = it.next() {
             if w == "track"
-                && let Some(x) = it.next().and_then(|s| s.trim_end_matches(',').parse().ok())
+                && let Some(x) = it
+                    .next()
+                    .and_then(|s| s.trim_end_matches(',').parse().ok())
+                    .and_then(valid)
             {
                 return Some(x);
             }
@@ -529,6 +552,15 @@ fn null_values(c: Candidate, theta: &[f64], t_mid: f64) -> Vec<f64> {
     }
 }
 
+/// Bounds of the whole θ of the model with `candidates`: θ1…θ6 free, then each candidate's.
+fn model_bounds(candidates: &[Candidate], t_range: (f64, f64)) -> Vec<(f64, f64)> {
+    let mut b = vec![(f64::NEG_INFINITY, f64::INFINITY); 6];
+    for c in candidates {
+        b.extend(candidate_bounds(*c, t_range));
+    }
+    b
+}
+
 /// Bounds of a candidate's parameters for the fit.
 fn candidate_bounds(c: Candidate, t_range: (f64, f64)) -> Vec<(f64, f64)> {
     let inf = f64::INFINITY;
@@ -571,16 +603,7 @@ fn patterns(c: Candidate, data: &Data, cur: &Current) -> Option<Vec<Pattern>> {
     cands.push(c);
     let model = data.model(&cands);
     let th6 = &cur.theta[..6];
-    let t_lo = data
-        .recs
-        .iter()
-        .map(|r| r.t[0])
-        .fold(f64::INFINITY, f64::min);
-    let t_hi = data
-        .recs
-        .iter()
-        .map(|r| r.t[r.len() - 1])
-        .fold(f64::NEG_INFINITY, f64::max);
+    let (t_lo, t_hi) = data.span();
     let null = null_values(c, th6, 0.5 * (t_lo + t_hi));
     let with = |vals: &[f64]| {
         let mut th = cur.theta.clone();
@@ -847,7 +870,7 @@ fn start_candidate(
     let mut guess = nominee.pattern.guess.clone();
     let (t_lo, t_hi) = data.span();
     let margin = 0.05 * (t_hi - t_lo);
-    let mut bounds: Vec<(f64, f64)> = vec![(f64::NEG_INFINITY, f64::INFINITY); base];
+    let mut bounds = model_bounds(&cur.candidates, (t_lo + margin, t_hi - margin));
     let cb = candidate_bounds(c, (t_lo + margin, t_hi - margin));
     for (g, &(lo, hi)) in guess.iter_mut().zip(&cb) {
         let span = if hi.is_finite() && lo.is_finite() {
@@ -997,23 +1020,7 @@ fn fit_candidate(
     let frame = data.frame();
     let (t_lo, t_hi) = data.span();
     let margin = 0.05 * (t_hi - t_lo);
-    type Run = (OutputErrorFit, Vec<f64>, Vec<usize>);
-    let run = |theta: &[f64], pinned: &[usize]| -> std::result::Result<Run, String> {
-        let restricted = Pinned::new(&model, theta.to_vec(), pinned);
-        let free_bounds: Vec<(f64, f64)> = restricted.free.iter().map(|&i| bounds[i]).collect();
-        let oe = OutputError {
-            bounds: Some(free_bounds),
-            mask: Some(data.train.clone()),
-            patience: 10,
-            tolerance: 1e-6,
-            ..OutputError::default()
-        };
-        let fit = oe
-            .fit(&restricted, &data.recs, &restricted.free_values())
-            .map_err(|e| format!("the fit failed: {e}"))?;
-        let full = restricted.expand(&fit.theta);
-        Ok((fit, full, restricted.free))
-    };
+    let run = |theta: &[f64], pinned: &[usize]| fit_pinned(data, &model, theta, pinned, &bounds);
     let two = matches!(
         c,
         Candidate::AccelerationLimit
@@ -1026,7 +1033,7 @@ fn fit_candidate(
         Ok(r) => r,
         // Both channels cannot be told apart (one never acts): each alone, the better kept.
         Err(first) if two && both_free => {
-            let mut best: Option<(Run, Vec<usize>)> = None;
+            let mut best: Option<(PinnedFit, Vec<usize>)> = None;
             for j in 0..2 {
                 let mut p = pinned.clone();
                 p.push(base + j);
@@ -1057,13 +1064,21 @@ fn fit_candidate(
                 (th[base], cost)
             })
             .collect();
-        let least = scan.iter().map(|x| x.1).fold(f64::INFINITY, f64::min);
-        let flat: Vec<f64> = scan
-            .iter()
-            .filter(|x| x.1 <= least * (1.0 + 1e-6) + 1e-12)
-            .map(|x| x.0)
-            .collect();
-        let (lo, hi) = (flat[0], flat[flat.len() - 1]);
+        // The contiguous run of near-minimal points around the least one.
+        let (arg, least) =
+            scan.iter().enumerate().fold(
+                (0, f64::INFINITY),
+                |a, (i, x)| if x.1 < a.1 { (i, x.1) } else { a },
+            );
+        let near = |i: usize| scan[i].1 <= least * (1.0 + 1e-6) + 1e-12;
+        let (mut a, mut b) = (arg, arg);
+        while a > 0 && near(a - 1) {
+            a -= 1;
+        }
+        while b + 1 < scan.len() && near(b + 1) {
+            b += 1;
+        }
+        let (lo, hi) = (scan[a].0, scan[b].0);
         time_resolution = 0.5 * (hi - lo) + step / 32.0;
         let t_best = 0.5 * (lo + hi);
         if (t_best - t0).abs() > 1e-9 {
@@ -1100,6 +1115,52 @@ fn fit_candidate(
             (fit, full, free) = run(&th, &pinned)?;
         }
     }
+    let mut new = current_of(&model, cands, pinned, &fit, full, &free, data)?;
+    if c == Candidate::PayloadChange {
+        // The change time's uncertainty is the width of its flat minimum.
+        new.std_err[base] = time_resolution;
+    }
+    Ok((new, fit))
+}
+
+/// An output-error fit of some parameters: the fit, the full θ, the free indices.
+type PinnedFit = (OutputErrorFit, Vec<f64>, Vec<usize>);
+
+/// Fits `model` on the training blocks from `theta` with the `pinned` parameters held
+/// (`bounds` for the full θ).
+fn fit_pinned(
+    data: &Data,
+    model: &Extended,
+    theta: &[f64],
+    pinned: &[usize],
+    bounds: &[(f64, f64)],
+) -> std::result::Result<PinnedFit, String> {
+    let restricted = Pinned::new(model, theta.to_vec(), pinned);
+    let oe = OutputError {
+        bounds: Some(restricted.free.iter().map(|&i| bounds[i]).collect()),
+        mask: Some(data.train.clone()),
+        patience: 10,
+        tolerance: 1e-6,
+        ..OutputError::default()
+    };
+    let fit = oe
+        .fit(&restricted, &data.recs, &restricted.free_values())
+        .map_err(|e| format!("the fit failed: {e}"))?;
+    let full = restricted.expand(&fit.theta);
+    Ok((fit, full, restricted.free))
+}
+
+/// The search state after a fit: standard errors and covariance spread back onto the full θ
+/// (held parameters 0), and the fitted model's simulation.
+fn current_of(
+    model: &Extended,
+    candidates: Vec<Candidate>,
+    pinned: Vec<usize>,
+    fit: &OutputErrorFit,
+    full: Vec<f64>,
+    free: &[usize],
+    data: &Data,
+) -> std::result::Result<Current, String> {
     let p = full.len();
     let mut std_err = vec![0.0; p];
     let mut covariance = DMatrix::zeros(p, p);
@@ -1109,24 +1170,17 @@ fn fit_candidate(
             covariance[(i, j)] = fit.covariance[(a, b)];
         }
     }
-    if c == Candidate::PayloadChange {
-        // The change time's uncertainty is the width of its flat minimum.
-        std_err[base] = time_resolution;
-    }
-    let sim = simulate_all(&model, &full, &data.recs, &fit.initial)
+    let sim = simulate_all(model, &full, &data.recs, &fit.initial)
         .ok_or("the fitted model does not simulate")?;
-    Ok((
-        Current {
-            candidates: cands,
-            pinned,
-            theta: full,
-            std_err,
-            covariance,
-            initial: fit.initial.clone(),
-            sim,
-        },
-        fit,
-    ))
+    Ok(Current {
+        candidates,
+        pinned,
+        theta: full,
+        std_err,
+        covariance,
+        initial: fit.initial.clone(),
+        sim,
+    })
 }
 
 /// The current model without its `k`-th candidate, refitted on the training blocks.
@@ -1148,43 +1202,10 @@ fn remove_candidate(data: &Data, cur: &Current, k: usize) -> std::result::Result
         .collect();
     let (t_lo, t_hi) = data.span();
     let margin = 0.05 * (t_hi - t_lo);
-    let mut bounds = vec![(f64::NEG_INFINITY, f64::INFINITY); 6];
-    for c in &cands {
-        bounds.extend(candidate_bounds(*c, (t_lo + margin, t_hi - margin)));
-    }
+    let bounds = model_bounds(&cands, (t_lo + margin, t_hi - margin));
     let model = data.model(&cands);
-    let restricted = Pinned::new(&model, theta, &pinned);
-    let oe = OutputError {
-        bounds: Some(restricted.free.iter().map(|&i| bounds[i]).collect()),
-        mask: Some(data.train.clone()),
-        patience: 10,
-        tolerance: 1e-6,
-        ..OutputError::default()
-    };
-    let fit = oe
-        .fit(&restricted, &data.recs, &restricted.free_values())
-        .map_err(|e| e.to_string())?;
-    let full = restricted.expand(&fit.theta);
-    let p = full.len();
-    let mut std_err = vec![0.0; p];
-    let mut covariance = DMatrix::zeros(p, p);
-    for (a, &i) in restricted.free.iter().enumerate() {
-        std_err[i] = fit.std_err[a];
-        for (b, &j) in restricted.free.iter().enumerate() {
-            covariance[(i, j)] = fit.covariance[(a, b)];
-        }
-    }
-    let sim = simulate_all(&model, &full, &data.recs, &fit.initial)
-        .ok_or("the model does not simulate")?;
-    Ok(Current {
-        candidates: cands,
-        pinned,
-        theta: full,
-        std_err,
-        covariance,
-        initial: fit.initial,
-        sim,
-    })
+    let (fit, full, free) = fit_pinned(data, &model, &theta, &pinned, &bounds)?;
+    current_of(&model, cands, pinned, &fit, full, &free, data)
 }
 
 /// Significance and plausibility of a fitted candidate; `Err` says why not.
@@ -1241,7 +1262,7 @@ fn check_candidate(data: &Data, new: &Current, c: Candidate) -> std::result::Res
                 let s = se[base + j];
                 let rel = if x > 0.0 { s / x } else { f64::INFINITY };
                 let frac = limit_binding(&data.recs, c, j, th[base + j]).unwrap_or(1.0);
-                if rel.is_nan() || rel >= 1.0 / 3.0 {
+                if s <= 0.0 || rel.is_nan() || rel >= 1.0 / 3.0 {
                     Some(format!(
                         "{} = {x:.4} ± {s:.4} is not significant",
                         names[j].name
@@ -1319,11 +1340,29 @@ pub fn diagnose(
     if recordings.is_empty() {
         return Err(DiagnoseError::Setting("no recording given".into()));
     }
-    if settings.blocks < 3 {
-        return Err(DiagnoseError::Setting(format!(
-            "blocks = {} must be at least 3",
+    let bad = |what: String| Err(DiagnoseError::Setting(what));
+    if !(3..=MAX_BLOCKS).contains(&settings.blocks) {
+        return bad(format!(
+            "blocks = {} must be 3 to {MAX_BLOCKS}",
             settings.blocks
-        )));
+        ));
+    }
+    if !(settings.alpha > 0.0 && settings.alpha < 1.0) {
+        return bad(format!("alpha = {} must be in (0, 1)", settings.alpha));
+    }
+    if !(settings.min_improvement.is_finite() && settings.min_improvement >= 0.0) {
+        return bad(format!(
+            "min_improvement = {} must be finite and ≥ 0",
+            settings.min_improvement
+        ));
+    }
+    if !(settings.max_lag_s.is_finite() && settings.max_lag_s > 0.0) {
+        return bad(format!("max_lag_s = {} must be > 0", settings.max_lag_s));
+    }
+    if let Some(t) = settings.track_m
+        && !(t.is_finite() && t > 0.0)
+    {
+        return bad(format!("track = {t} m must be > 0"));
     }
     let bar = if settings.progress {
         ProgressBar::new(4)
@@ -1411,6 +1450,7 @@ pub fn diagnose(
         train,
         valid,
         dt,
+        blocks: settings.blocks,
         track,
         weight,
         accel,
@@ -1606,7 +1646,8 @@ pub fn diagnose(
                     ("v", before.v.fit_percent, after.v.fit_percent),
                     ("ω", before.w.fit_percent, after.w.fit_percent),
                 ] {
-                    if a < b - 1.0 {
+                    // A channel constant over the validation blocks has no fit % (NaN).
+                    if b.is_finite() && (a.is_nan() || a < b - 1.0) {
                         return Err(format!(
                             "{name}'s validation fit falls from {b:.1} % to {a:.1} %"
                         ));
@@ -1716,6 +1757,7 @@ pub fn diagnose(
                         ),
                     });
                     cur = without;
+                    tried.push(Candidate::by_name(name).unwrap_or(c));
                     break;
                 }
             }
