@@ -738,7 +738,7 @@ fn patterns(c: Candidate, data: &Data, cur: &Current) -> Option<Vec<Pattern>> {
         }
         Candidate::PayloadChange => {
             // A grid of change times over the middle of the run.
-            let grid = 7;
+            let grid = 5;
             let mut out = Vec::new();
             for g in 1..=grid {
                 let ts = t_lo + (t_hi - t_lo) * g as f64 / (grid + 1) as f64;
@@ -1140,7 +1140,8 @@ fn fit_pinned(
         bounds: Some(restricted.free.iter().map(|&i| bounds[i]).collect()),
         mask: Some(data.train.clone()),
         patience: 10,
-        tolerance: 1e-6,
+        tolerance: 1e-5,
+        forward_differences: true,
         ..OutputError::default()
     };
     let fit = oe

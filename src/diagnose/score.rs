@@ -9,13 +9,14 @@
 //!
 //! ```text
 //! S⊥ = (I − J J⁺) S,   g = S⊥ᵀ e = Σ_k g_k,   LM = gᵀ V⁻¹ g ~ χ²(q),
-//! V = Σ_r Σ_l w_l Σ_k g_k g_{k+l}ᵀ (+ transposes),   β̂ = (S⊥ᵀ S⊥)⁻¹ S⊥ᵀ e,
+//! V = Σ_r n_r/((n_r − L) (L + 1)) Σ_t B_t B_tᵀ,  B_t = Σ_{k=t}^{t+L} g_k,   β̂ = (S⊥ᵀ S⊥)⁻¹ S⊥ᵀ e,
 //! ```
 //!
 //! the Lagrange-multiplier (score) test of β = β₀ (Engle 1984), with rows weighted by 1/σ_c,
-//! g_k the per-instant scores, and V the Newey–West estimate of their long-run covariance
-//! (Bartlett weights w_l over L instants, within each recording) so that coloured residuals do
-//! not pass for structure. β̂ is one Gauss–Newton step from β₀: the candidate's first guess.
+//! g_k the per-instant scores, and V the Bartlett-kernel (Newey–West) estimate of their
+//! long-run covariance over L instants within each recording, computed as overlapping batch
+//! means of L + 1 instants (equal up to edge terms), so that coloured residuals do not pass for
+//! structure. β̂ is one Gauss–Newton step from β₀: the candidate's first guess.
 //! `payload_change` has a time that is not identified under the null; its statistic is the
 //! largest over a grid of times, with a Bonferroni factor for the grid (Davies 1987).
 
@@ -217,11 +218,25 @@ pub(crate) fn score(
         for t in 0..n {
             g_total += g.row(t).transpose();
         }
-        meat += g.transpose() * &g;
-        for l in 1..=lags.min(n.saturating_sub(1)) {
-            let w = 1.0 - l as f64 / (lags + 1) as f64;
-            let c = g.rows(0, n - l).transpose() * g.rows(l, n - l);
-            meat += (&c + c.transpose()) * w;
+        // Overlapping batch means over windows of m = L + 1 instants: the Bartlett-kernel
+        // estimate of Var(Σ g_k) up to edge terms, in O(n k²) instead of O(n L k²).
+        let m = lags + 1;
+        if n > m {
+            let mut pre = DMatrix::<f64>::zeros(n + 1, k);
+            for t in 0..n {
+                for j in 0..k {
+                    pre[(t + 1, j)] = pre[(t, j)] + g[(t, j)];
+                }
+            }
+            let windows = n - m + 1;
+            let mut acc = DMatrix::<f64>::zeros(k, k);
+            for t in 0..windows {
+                let b = pre.row(t + m) - pre.row(t);
+                acc += b.transpose() * b;
+            }
+            meat += acc * (n as f64 / (windows as f64 * m as f64));
+        } else {
+            meat += g.transpose() * &g;
         }
     }
     let meat_inv = meat.clone().pseudo_inverse(1e-12 * meat.max().abs()).ok()?;
