@@ -142,7 +142,7 @@ fn each_candidate_reproduces_its_simulator_effect() {
                     rms(&without) / rms(meas)
                 );
                 // The rate limit's kinks (where the setpoint reaches its target) fall inside the
-                // model's sub-steps, which ramp linearly across them: O(h) there, h ≤ τ/10.
+                // model's sub-steps, which ramp linearly across them: O(h) there, h ≤ τ/5.
                 let tol = if cand == Candidate::AccelerationLimit {
                     5e-3
                 } else {
