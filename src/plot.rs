@@ -55,6 +55,71 @@ fn stem(p: &Path, i: usize) -> String {
         .collect()
 }
 
+/// One line of a time-series panel: values, colour, width, legend name.
+type Line<'a> = (&'a [f64], RGBColor, u32, &'a str);
+
+/// Draws a panel of `lines` against `t` with a legend; samples where `shade` is true are
+/// drawn on a grey band (validation blocks).
+fn time_panel<DB: DrawingBackend>(
+    area: &DrawingArea<DB, plotters::coord::Shift>,
+    caption: &str,
+    y_desc: &str,
+    t: &[f64],
+    lines: &[Line<'_>],
+    shade: Option<&[bool]>,
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let step = (t.len() / MAX_POINTS).max(1);
+    let (y0, y1) = range(lines.iter().flat_map(|l| l.0.iter().copied()));
+    let (t0, t1) = (t[0], t[t.len() - 1]);
+    let mut chart = ChartBuilder::on(area)
+        .caption(caption, ("sans-serif", 18))
+        .margin(10)
+        .x_label_area_size(35)
+        .y_label_area_size(60)
+        .build_cartesian_2d(t0..t1, y0..y1)?;
+    chart
+        .configure_mesh()
+        .x_desc("t [s]")
+        .y_desc(y_desc)
+        .draw()?;
+    if let Some(flags) = shade {
+        let mut k = 0;
+        while k < t.len() {
+            if flags[k] {
+                let start = k;
+                while k < t.len() && flags[k] {
+                    k += 1;
+                }
+                chart.draw_series(std::iter::once(Rectangle::new(
+                    [(t[start], y0), (t[k - 1], y1)],
+                    RGBColor(230, 230, 230).filled(),
+                )))?;
+            }
+            k += 1;
+        }
+    }
+    for &(y, color, width, name) in lines {
+        chart
+            .draw_series(LineSeries::new(
+                t.iter().zip(y).step_by(step).map(|(a, b)| (*a, *b)),
+                color.stroke_width(width),
+            ))?
+            .label(name)
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+            });
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()?;
+    Ok(())
+}
+
 /// Writes the plots into `dir` (created if needed); returns the files written.
 ///
 /// # Errors
@@ -71,53 +136,22 @@ pub fn write_plots(id: &Identification, dir: &Path) -> Result<Vec<PathBuf>> {
             root.fill(&WHITE)?;
             let panels = root.split_evenly((2, 1));
             for (ch, area) in panels.iter().enumerate() {
-                let step = (s.t.len() / MAX_POINTS).max(1);
-                let (y0, y1) = range(s.measured[ch].iter().chain(&s.simulated[ch]).copied());
-                let (t0, t1) = (s.t[0], s.t[s.t.len() - 1]);
                 let fit = id.files[i].fit_percent[ch];
-                let mut chart = ChartBuilder::on(area)
-                    .caption(
-                        format!(
-                            "{} — {}: measured vs free-run simulation (fit {fit:.1} %)",
-                            s.source.display(),
-                            labels[ch].1
-                        ),
-                        ("sans-serif", 18),
-                    )
-                    .margin(10)
-                    .x_label_area_size(35)
-                    .y_label_area_size(60)
-                    .build_cartesian_2d(t0..t1, y0..y1)?;
-                chart
-                    .configure_mesh()
-                    .x_desc("t [s]")
-                    .y_desc(labels[ch].0)
-                    .draw()?;
-                chart
-                    .draw_series(LineSeries::new(
-                        s.t.iter()
-                            .zip(&s.measured[ch])
-                            .step_by(step)
-                            .map(|(a, b)| (*a, *b)),
-                        BLUE.stroke_width(1),
-                    ))?
-                    .label("measured")
-                    .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE));
-                chart
-                    .draw_series(LineSeries::new(
-                        s.t.iter()
-                            .zip(&s.simulated[ch])
-                            .step_by(step)
-                            .map(|(a, b)| (*a, *b)),
-                        RED.stroke_width(2),
-                    ))?
-                    .label("simulated")
-                    .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED));
-                chart
-                    .configure_series_labels()
-                    .background_style(WHITE.mix(0.8))
-                    .border_style(BLACK)
-                    .draw()?;
+                time_panel(
+                    area,
+                    &format!(
+                        "{} — {}: measured vs free-run simulation (fit {fit:.1} %)",
+                        s.source.display(),
+                        labels[ch].1
+                    ),
+                    labels[ch].0,
+                    &s.t,
+                    &[
+                        (&s.measured[ch], BLUE, 1, "measured"),
+                        (&s.simulated[ch], RED, 2, "simulated"),
+                    ],
+                    None,
+                )?;
             }
             root.present()?;
         }
@@ -310,7 +344,6 @@ pub fn write_diagnosis_plots(d: &Diagnosis, dir: &Path) -> Result<Vec<PathBuf>> 
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let mut out = Vec::new();
     let labels = [("v [m/s]", "v"), ("ω [rad/s]", "ω")];
-    let shade = RGBColor(230, 230, 230);
     for (i, s) in d.series.iter().enumerate() {
         let path = dir.join(format!("diagnosis_response_{}.png", stem(&s.source, i)));
         {
@@ -318,70 +351,23 @@ pub fn write_diagnosis_plots(d: &Diagnosis, dir: &Path) -> Result<Vec<PathBuf>> 
             root.fill(&WHITE)?;
             let panels = root.split_evenly((2, 1));
             for (ch, area) in panels.iter().enumerate() {
-                let step = (s.t.len() / MAX_POINTS).max(1);
-                let (y0, y1) = range(
-                    s.measured[ch]
-                        .iter()
-                        .chain(&s.nominal[ch])
-                        .chain(&s.extended[ch])
-                        .copied(),
-                );
-                let (t0, t1) = (s.t[0], s.t[s.t.len() - 1]);
-                let mut chart = ChartBuilder::on(area)
-                    .caption(
-                        format!(
-                            "{} — {}: measured, nominal, {} (grey: validation)",
-                            s.source.display(),
-                            labels[ch].1,
-                            d.final_stage.model
-                        ),
-                        ("sans-serif", 18),
-                    )
-                    .margin(10)
-                    .x_label_area_size(35)
-                    .y_label_area_size(60)
-                    .build_cartesian_2d(t0..t1, y0..y1)?;
-                chart
-                    .configure_mesh()
-                    .x_desc("t [s]")
-                    .y_desc(labels[ch].0)
-                    .draw()?;
-                // Validation blocks.
-                let mut k = 0;
-                while k < s.t.len() {
-                    if s.validation[k] {
-                        let start = k;
-                        while k < s.t.len() && s.validation[k] {
-                            k += 1;
-                        }
-                        chart.draw_series(std::iter::once(Rectangle::new(
-                            [(s.t[start], y0), (s.t[k - 1], y1)],
-                            shade.filled(),
-                        )))?;
-                    }
-                    k += 1;
-                }
-                let series: [(&[f64], RGBColor, u32, &str); 3] = [
-                    (&s.measured[ch], BLUE, 1, "measured"),
-                    (&s.nominal[ch], RGBColor(230, 120, 0), 1, "nominal"),
-                    (&s.extended[ch], RGBColor(200, 0, 0), 2, "extended"),
-                ];
-                for (y, color, width, name) in series {
-                    chart
-                        .draw_series(LineSeries::new(
-                            s.t.iter().zip(y).step_by(step).map(|(a, b)| (*a, *b)),
-                            color.stroke_width(width),
-                        ))?
-                        .label(name)
-                        .legend(move |(x, y)| {
-                            PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-                        });
-                }
-                chart
-                    .configure_series_labels()
-                    .background_style(WHITE.mix(0.8))
-                    .border_style(BLACK)
-                    .draw()?;
+                time_panel(
+                    area,
+                    &format!(
+                        "{} — {}: measured, nominal, {} (grey: validation)",
+                        s.source.display(),
+                        labels[ch].1,
+                        d.final_stage.model
+                    ),
+                    labels[ch].0,
+                    &s.t,
+                    &[
+                        (&s.measured[ch], BLUE, 1, "measured"),
+                        (&s.nominal[ch], RGBColor(230, 120, 0), 1, "nominal"),
+                        (&s.extended[ch], RGBColor(200, 0, 0), 2, "extended"),
+                    ],
+                    Some(&s.validation),
+                )?;
             }
             root.present()?;
         }
