@@ -10,7 +10,8 @@
 //! 2. **test** — on the validation blocks: residual whiteness (Ljung–Box) and residual–command
 //!    independence (cross-correlation at lags −L…L with Ljung's bounds,
 //!    `wheelid_core::residual`), free-run fit %; on the training blocks: each candidate's
-//!    fingerprint, a score test of its pattern ([`score`]). A mismatch is declared only on
+//!    fingerprint, a score test of its pattern ([`score`]; a limit probed at three fractions of
+//!    the level read off the data, a payload change at five times, Bonferroni for each grid). A mismatch is declared only on
 //!    tests that survive Holm's correction over the whole family (independence and
 //!    fingerprints), never on whiteness alone;
 //! 3. **locate** — per channel, the residual by lag, frequency band, operating region and time
@@ -289,6 +290,9 @@ const FINGERPRINT_LEFT: f64 = 0.5;
 
 /// Most blocks a recording is cut into.
 const MAX_BLOCKS: usize = 50;
+
+/// Fractions of a limit's data-read level at which its fingerprint is probed.
+const PROBE_FRACTIONS: [f64; 3] = [0.7, 0.85, 1.0];
 
 /// A value far beyond any command: a limit at this level never binds.
 const NEVER: f64 = 1e6;
@@ -686,7 +690,6 @@ fn patterns(c: Candidate, data: &Data, cur: &Current) -> Option<Vec<Pattern>> {
         Candidate::VelocitySaturation | Candidate::AccelerationLimit => {
             // Probe levels in setpoint units, from the measured response.
             let sat = c == Candidate::VelocitySaturation;
-            let mut cols = Vec::new();
             let mut params = Vec::new();
             let mut probe = null.clone();
             let mut words = Vec::new();
@@ -721,20 +724,35 @@ fn patterns(c: Candidate, data: &Data, cur: &Current) -> Option<Vec<Pattern>> {
                     (level, over >= 0.01)
                 };
                 if binding && level > 0.0 {
-                    let mut v = null.clone();
-                    v[ch] = level;
                     probe[ch] = level;
-                    let y = with(&v)?;
-                    cols.push(frame.flatten(&score::difference(&y, &cur.sim, 1.0)));
                     params.push(ch);
                 }
             }
-            if cols.is_empty() {
+            if params.is_empty() {
                 return None;
             }
-            let mut p = single(cols, params, words.join("; "));
-            p.guess = probe;
-            Some(vec![p])
+            // The level read off a nominal fit that has absorbed part of the limit sits above
+            // the true one: probed at a few fractions of it, the best taken (Bonferroni).
+            let mut out = Vec::new();
+            for f in PROBE_FRACTIONS {
+                let mut v = null.clone();
+                for &ch in &params {
+                    v[ch] = f * probe[ch];
+                }
+                let cols = params
+                    .iter()
+                    .map(|&ch| {
+                        let mut one = null.clone();
+                        one[ch] = v[ch];
+                        with(&one).map(|y| frame.flatten(&score::difference(&y, &cur.sim, 1.0)))
+                    })
+                    .collect::<Option<Vec<_>>>()?;
+                let mut p = single(cols, params.clone(), words.join("; "));
+                p.guess = v;
+                p.grid = PROBE_FRACTIONS.len();
+                out.push(p);
+            }
+            Some(out)
         }
         Candidate::PayloadChange => {
             // A grid of change times over the middle of the run.
