@@ -139,6 +139,23 @@ pub fn read_toml<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T> {
         .map_err(|e| anyhow::anyhow!("{}: {}", path.display(), toml_msg(&text, &e)))
 }
 
+/// The configuration at `path` and the directory its relative paths are resolved against, or
+/// the defaults and the current directory when no path is given.
+///
+/// # Errors
+/// As [`read_toml`].
+pub fn read_toml_or_default<T: for<'de> Deserialize<'de> + Default>(
+    path: Option<&Path>,
+) -> Result<(T, PathBuf)> {
+    match path {
+        Some(p) => Ok((
+            read_toml(p)?,
+            p.parent().map(PathBuf::from).unwrap_or_default(),
+        )),
+        None => Ok((T::default(), PathBuf::new())),
+    }
+}
+
 /// The robot: the built-in `flag` (a command-line choice) if given, else a whole `profile`
 /// from the config, else the config's built-in `name` (default `pioneer3dx`).
 ///

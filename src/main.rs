@@ -5,7 +5,8 @@ use std::path::PathBuf;
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
 use wheelid::config::{
-    DiagnoseConfig, ExcitationConfig, SimulateConfig, TrackConfig, read_toml, robot_profile,
+    DiagnoseConfig, ExcitationConfig, SimulateConfig, TrackConfig, read_toml, read_toml_or_default,
+    robot_profile,
 };
 use wheelid::files::{ModelFile, read_bounds};
 use wheelid::identify::{Estimator, IdentifySettings, identify};
@@ -167,13 +168,7 @@ fn run_simulate(a: SimulateArgs) -> Result<()> {
 }
 
 fn run_track(a: TrackArgs) -> Result<()> {
-    let (cfg, base): (TrackConfig, PathBuf) = match &a.config {
-        Some(p) => (
-            read_toml(p)?,
-            p.parent().map(PathBuf::from).unwrap_or_default(),
-        ),
-        None => (TrackConfig::default(), PathBuf::new()),
-    };
+    let (cfg, base): (TrackConfig, PathBuf) = read_toml_or_default(a.config.as_deref())?;
     let robot = robot_profile(
         a.robot.as_deref(),
         cfg.robot.as_deref(),
@@ -376,13 +371,7 @@ struct DiagnoseArgs {
 }
 
 fn run_diagnose(a: DiagnoseArgs) -> Result<()> {
-    let (cfg, base): (DiagnoseConfig, PathBuf) = match &a.config {
-        Some(p) => (
-            read_toml(p)?,
-            p.parent().map(PathBuf::from).unwrap_or_default(),
-        ),
-        None => (DiagnoseConfig::default(), PathBuf::new()),
-    };
+    let (cfg, base): (DiagnoseConfig, PathBuf) = read_toml_or_default(a.config.as_deref())?;
     let mut settings = cfg.settings();
     let name = a.model.clone().or(cfg.model.clone());
     let model = models::by_name(name.as_deref().unwrap_or("vw-pd")).with_context(|| {

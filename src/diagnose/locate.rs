@@ -121,12 +121,9 @@ fn rms(x: impl Iterator<Item = f64>) -> f64 {
     if n == 0 { 0.0 } else { (s / n as f64).sqrt() }
 }
 
+/// The `q` quantile of |x| (0 for no samples).
 fn quantile(x: &[f64], q: f64) -> f64 {
-    let mut v: Vec<f64> = x.iter().map(|a| a.abs()).collect();
-    v.sort_by(f64::total_cmp);
-    v.get(((v.len() as f64 - 1.0) * q).round() as usize)
-        .copied()
-        .unwrap_or(0.0)
+    super::abs_quantile(x.iter().copied(), q)
 }
 
 /// Power per band of a series sampled every `dt` (periodogram).
