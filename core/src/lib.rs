@@ -1,7 +1,7 @@
 //! # wheelid-core
 //!
 //! The bottom layer of wheelid: the data (recordings, conditioned signals), the traits that the
-//! other crates implement ([`DynamicModel`], [`RegressorModel`], [`Solver`]) and the errors.
+//! other crates implement ([`DynamicModel`], [`RegressorModel`], [`Solver`], [`Robot`]) and the errors.
 //!
 //! A run walks the layers once:
 //! **read** ([`recording`]) → **condition** ([`condition`], [`signal`]: resample, align, filter,
@@ -14,6 +14,7 @@ pub mod metrics;
 pub mod model;
 pub mod recording;
 pub mod residual;
+pub mod robot;
 pub mod signal;
 pub mod solver;
 
@@ -24,4 +25,5 @@ pub use model::{
     Simulation,
 };
 pub use recording::{CommandHold, Recording, VelocitySampling};
+pub use robot::{Odometry, Pose, Robot, RobotError};
 pub use solver::{BoundState, LinearFit, LinearProblem, SolveError, SolveStatus, Solver};

@@ -9,7 +9,10 @@
 pub mod control;
 pub mod effects;
 pub mod excitation;
+pub mod khepera;
+pub mod pioneer;
 pub mod profile;
+pub mod replay;
 pub mod simulator;
 pub mod tracking;
 pub mod trajectory;

@@ -26,7 +26,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
-use wheelid_core::{Error, Recording, Result};
+use wheelid_core::{Error, Odometry, Pose, Recording, Result, Robot, RobotError};
 
 use crate::effects::Effects;
 use crate::excitation::Excitation;
@@ -108,6 +108,8 @@ pub struct SimRobot {
     /// The (rate-limited) setpoint the base follows.
     setpoint: [f64; 2],
     last: Sample,
+    /// The command last given through [`Robot::send`].
+    sent: (f64, f64),
 }
 
 impl SimRobot {
@@ -161,6 +163,7 @@ impl SimRobot {
                 y: 0.0,
                 phi: 0.0,
             },
+            sent: (0.0, 0.0),
         };
         robot.t = robot.jitter(0);
         robot.last.t = robot.t;
@@ -387,6 +390,36 @@ impl SimRobot {
     }
 }
 
+/// The simulator as a robot backend (`[robot] type = "simulator"`): `send` holds the command,
+/// `read` advances one period ([`SimRobot::step`]) and reports what the encoders measured, on
+/// the simulation's clock.
+impl Robot for SimRobot {
+    fn name(&self) -> &str {
+        "simulator"
+    }
+    fn period_s(&self) -> f64 {
+        self.profile.period_s
+    }
+    fn send(&mut self, v_ref: f64, w_ref: f64) -> std::result::Result<(), RobotError> {
+        self.sent = (v_ref, w_ref);
+        Ok(())
+    }
+    fn read(&mut self) -> std::result::Result<Odometry, RobotError> {
+        let s = self.step(self.sent.0, self.sent.1);
+        Ok(Odometry {
+            t: s.t,
+            v: s.v,
+            w: s.w,
+            pose: Pose {
+                x: s.x,
+                y: s.y,
+                heading: s.phi,
+            },
+            applied: None,
+        })
+    }
+}
+
 /// Simulates `profile` under `excitation` from rest at the origin and returns the recording
 /// (t, v_ref, ω_ref, v, ω, x, y, φ at each sample instant; the command at t_k is held until
 /// t_{k+1}). The metadata name the robot, seed, true θ and active effects, with
@@ -449,4 +482,36 @@ pub fn simulate_recording(
         },
     );
     Ok(rec)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn as_a_robot_it_steps_like_step_with_the_command_it_was_sent() {
+        let profile = RobotProfile::pioneer3dx();
+        let settings = SimSettings::default();
+        let mut direct = SimRobot::new(&profile, &settings).expect("robot");
+        let mut boxed: Box<dyn Robot> =
+            Box::new(SimRobot::new(&profile, &settings).expect("robot"));
+        assert_eq!(boxed.name(), "simulator");
+        assert_eq!(boxed.period_s(), profile.period_s);
+        for k in 0..30 {
+            let (v_ref, w_ref) = (0.3 * (k as f64 * 0.2).sin(), 0.5);
+            boxed.send(v_ref, w_ref).expect("send");
+            let o = boxed.read().expect("read");
+            let s = direct.step(v_ref, w_ref);
+            assert_eq!((o.t, o.v, o.w), (s.t, s.v, s.w));
+            assert_eq!((o.pose.x, o.pose.y, o.pose.heading), (s.x, s.y, s.phi));
+            assert_eq!(o.applied, None);
+        }
+        // The command holds until the next send; stop sends zero.
+        boxed.stop().expect("stop");
+        for _ in 0..100 {
+            boxed.read().expect("read");
+        }
+        let o = boxed.read().expect("read");
+        assert!(o.v.abs() < 0.01 && o.w.abs() < 0.02, "{o:?}");
+    }
 }

@@ -1,0 +1,117 @@
+//! The robot backend trait: what every robot — simulated, replayed from a log, or real over a
+//! serial line or TCP — offers to an identification run.
+//!
+//! A run drives a robot one period at a time:
+//!
+//! ```text
+//! loop {
+//!     robot.send(v_ref, w_ref)?;      // the command, held until the next send (zero-order hold)
+//!     let o = robot.read()?;          // the robot's next report: t, v, ω, pose
+//! }
+//! robot.stop()?;                      // zero command, then release the link
+//! ```
+//!
+//! so that the k-th report answers the commands sent before it. Units are SI throughout
+//! (m/s, rad/s, m, rad, s) whatever the robot's own protocol speaks; each backend's docs name
+//! the protocol source it follows and how it converts.
+
+use std::fmt;
+
+/// A planar pose: position of the robot's reference point and heading.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Pose {
+    /// x [m].
+    pub x: f64,
+    /// y [m].
+    pub y: f64,
+    /// Heading ψ [rad], counter-clockwise from the x axis (unwrapped where the backend can).
+    pub heading: f64,
+}
+
+/// One report of a robot: timestamped velocities and pose.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Odometry {
+    /// Time of the report [s], on the robot's clock for simulated and replayed robots, on the
+    /// host's monotonic clock since the link opened for real ones.
+    pub t: f64,
+    /// Forward velocity v [m/s].
+    pub v: f64,
+    /// Angular velocity ω [rad/s].
+    pub w: f64,
+    /// Pose by the robot's odometry.
+    pub pose: Pose,
+    /// The command (v_ref [m/s], ω_ref [rad/s]) the robot acted on over the period before this
+    /// report, when it says so: a replayed log reports its recorded command (whatever it was
+    /// sent); `None` means "the command you sent".
+    pub applied: Option<(f64, f64)>,
+}
+
+/// What can go wrong while talking to a robot.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum RobotError {
+    /// The link (serial port, socket, file) failed; `what` says which and while doing what.
+    #[error("{what}: {source}")]
+    Io {
+        /// The link and the operation, e.g. `127.0.0.1:8101: reading a SIP`.
+        what: String,
+        /// The underlying error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The robot answered something the protocol does not allow (bad checksum, unknown reply).
+    #[error("protocol error: {0}")]
+    Protocol(String),
+    /// No answer within the time allowed.
+    #[error("timed out: {0}")]
+    Timeout(String),
+    /// The robot has nothing more to report (a replayed log reached its end).
+    #[error("the robot has no more data (end of the log)")]
+    Ended,
+    /// A setting the backend cannot use (a bad period, a missing topic, …).
+    #[error("{0}")]
+    Setting(String),
+}
+
+impl RobotError {
+    /// An [`RobotError::Io`] for `what`.
+    pub fn io(what: impl fmt::Display, source: std::io::Error) -> Self {
+        RobotError::Io {
+            what: what.to_string(),
+            source,
+        }
+    }
+}
+
+/// A differential-drive robot backend: send (v_ref, ω_ref), read timestamped v, ω and pose,
+/// once per period.
+///
+/// Object safe: backends are chosen at run time from a config (`Box<dyn Robot>`).
+pub trait Robot {
+    /// A short name for reports (`simulator`, `replay`, `pioneer`, `khepera`, or a plugin's).
+    fn name(&self) -> &str;
+
+    /// The control period Δt [s]: how often the robot reports and accepts a new command.
+    fn period_s(&self) -> f64;
+
+    /// Sends the command v_ref [m/s], ω_ref [rad/s]; it holds until the next `send`.
+    ///
+    /// # Errors
+    /// [`RobotError::Io`] if the link fails.
+    fn send(&mut self, v_ref: f64, w_ref: f64) -> Result<(), RobotError>;
+
+    /// Waits for the robot's next report (about one period after the previous one) and returns it.
+    ///
+    /// # Errors
+    /// [`RobotError::Io`], [`RobotError::Protocol`] or [`RobotError::Timeout`] on a link
+    /// problem; [`RobotError::Ended`] when a replayed log has no more samples.
+    fn read(&mut self) -> Result<Odometry, RobotError>;
+
+    /// Stops the robot (zero command) and releases the link; the default sends (0, 0).
+    ///
+    /// # Errors
+    /// As [`Robot::send`].
+    fn stop(&mut self) -> Result<(), RobotError> {
+        self.send(0.0, 0.0)
+    }
+}

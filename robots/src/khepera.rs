@@ -1,0 +1,1 @@
+//! Khepera III backend over the serial text protocol (to be written).

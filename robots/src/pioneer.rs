@@ -1,0 +1,1 @@
+//! Pioneer 3-DX backend over ARCOS (to be written).
