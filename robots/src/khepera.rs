@@ -1,1 +1,0 @@
-//! Khepera III backend over the serial text protocol (to be written).

@@ -1,1 +1,0 @@
-//! Pioneer 3-DX backend over ARCOS (to be written).
