@@ -15,7 +15,7 @@
 
 use std::path::PathBuf;
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use wheelid_core::condition::{self, ConditionSettings, CutoffChoice};
 use wheelid_core::{
     BoundState, ChannelRegression, Conditioned, LinearProblem, Recording, RegressorModel,
@@ -59,7 +59,7 @@ pub struct IdentifySettings {
 }
 
 /// How θ is estimated from the recordings.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "snake_case")]
 pub enum Estimator {
     /// Least squares on the filtered regression (Laut 2011 eq. 4.3–4.7): fast, but biased when

@@ -12,7 +12,8 @@
 //! * [`solvers`] (`wheelid-solvers`): OLS and box-bounded least squares;
 //! * [`robots`] (`wheelid-robots`): robot profiles, excitations, the simulator;
 //! * this crate: the identification run ([`identify`]), its files ([`files`]), reports
-//!   ([`report`]) and plots ([`plot`]).
+//!   ([`report`]) and plots ([`plot`]); config-driven runs ([`run`]) and external plugins
+//!   ([`plugins`]).
 //!
 //! ```
 //! use wheelid::{identify::{identify, IdentifySettings}, models::VwPd, solvers::Ols};
@@ -30,7 +31,9 @@ pub mod diagnose;
 pub mod files;
 pub mod identify;
 pub mod plot;
+pub mod plugins;
 pub mod report;
+pub mod run;
 
 pub use wheelid_core as core;
 pub use wheelid_models as models;

@@ -39,6 +39,11 @@ enum Command {
     /// validation fit improve. With no file, diagnoses a built-in simulated Pioneer 3-DX with
     /// a concealed dead time and yaw-rate limit.
     Diagnose(DiagnoseArgs),
+    /// Run a whole job from a TOML file: drive a robot backend (simulator, replay of a CSV or
+    /// ROS 2 MCAP bag, Pioneer over ARCOS, Khepera III over serial/TCP, or a plugin's) with an
+    /// excitation, identify the chosen model with the chosen solver, and write the recording,
+    /// the model (TOML) and the report. See `examples/configs/run_*.toml`.
+    Run(RunArgs),
     /// Figure-eight tracking with the inverse-dynamics controller and adaptive law (thesis
     /// ch. 3–4) on a simulated robot; reports the distance error.
     Track(TrackArgs),
@@ -69,6 +74,15 @@ struct SimulateArgs {
     /// Output CSV file.
     #[arg(long, short)]
     out: PathBuf,
+}
+
+#[derive(clap::Args)]
+struct RunArgs {
+    /// The run's TOML configuration.
+    config: PathBuf,
+    /// Print the report as JSON.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(clap::Args)]
@@ -113,6 +127,23 @@ struct TrackArgs {
     /// Print the report as JSON.
     #[arg(long)]
     json: bool,
+}
+
+fn run_run(a: RunArgs) -> Result<()> {
+    use std::io::IsTerminal;
+    let out = wheelid::run::run(&a.config, std::io::stderr().is_terminal())?;
+    if a.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&report::to_json(&out.identification, None))?
+        );
+    } else {
+        print!("{}", report::to_text(&out.identification, None));
+        for f in &out.files {
+            println!("written: {}", f.display());
+        }
+    }
+    Ok(())
 }
 
 fn run_simulate(a: SimulateArgs) -> Result<()> {
@@ -459,6 +490,7 @@ fn main() -> Result<()> {
     match Cli::parse().command {
         Command::Diagnose(a) => run_diagnose(a),
         Command::Identify(a) => run_identify(a),
+        Command::Run(a) => run_run(a),
         Command::Simulate(a) => run_simulate(a),
         Command::Track(a) => run_track(a),
     }

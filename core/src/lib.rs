@@ -12,6 +12,7 @@ pub mod condition;
 pub mod error;
 pub mod metrics;
 pub mod model;
+pub mod plugin;
 pub mod recording;
 pub mod residual;
 pub mod robot;

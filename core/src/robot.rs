@@ -1,19 +1,26 @@
 //! The robot backend trait: what every robot — simulated, replayed from a log, or real over a
 //! serial line or TCP — offers to an identification run.
 //!
-//! A run drives a robot one period at a time:
+//! A run drives a robot one period at a time: it reads the robot's report, decides the next
+//! command (v, ω) from it, and sends that command, which holds (zero-order hold) until the next
+//! `send`:
 //!
 //! ```text
+//! // read, then decide, then send: row k of a recording = (t_k, command sent after report k, v_k, ω_k, pose_k)
 //! loop {
-//!     robot.send(v_ref, w_ref)?;      // the command, held until the next send (zero-order hold)
-//!     let o = robot.read()?;          // the robot's next report: t, v, ω, pose
+//!     let o = robot.read()?;                 // report k at t_k (answers the commands sent before it)
+//!     let (v_ref, w_ref) = robot.send(v, w)?; // the command as the robot will act on it from t_k to t_{k+1}
 //! }
-//! robot.stop()?;                      // zero command, then release the link
+//! robot.stop()?;                             // zero command, then release the link
 //! ```
 //!
-//! so that the k-th report answers the commands sent before it. Units are SI throughout
-//! (m/s, rad/s, m, rad, s) whatever the robot's own protocol speaks; each backend's docs name
-//! the protocol source it follows and how it converts.
+//! So report k answers the commands sent before it, and the command to record in row k is the
+//! one [`Robot::send`] *returns* after report k: the request (v, ω) as the robot will act on it
+//! over [t_k, t_{k+1}) — after the backend's clamps and its protocol's rounding (Pioneer: whole
+//! mm/s and °/s; Khepera: whole speed units per wheel), or, for a replayed log, the command the
+//! log recorded whatever was requested. Units are SI throughout (m/s, rad/s, m, rad, s)
+//! whatever the robot's own protocol speaks; each backend's docs name the protocol source it
+//! follows and how it converts.
 
 use std::fmt;
 
@@ -31,8 +38,12 @@ pub struct Pose {
 /// One report of a robot: timestamped velocities and pose.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Odometry {
-    /// Time of the report [s], on the robot's clock for simulated and replayed robots, on the
-    /// host's monotonic clock since the link opened for real ones.
+    /// Time of the report \[s\] on the robot's clock: the simulation's time (simulator), the
+    /// log's time (replay), or, for the serial/TCP backends (Pioneer, Khepera), the reports
+    /// counted × the period, t = k·Δt for the k-th report — deterministic, never the host's
+    /// clock. Each backend documents its clock: `wheelid_robots::SimRobot`'s `Robot` impl,
+    /// `wheelid_robots::replay::Replay`, `wheelid_robots::pioneer::Pioneer` and
+    /// `wheelid_robots::khepera::Khepera`.
     pub t: f64,
     /// Forward velocity v [m/s].
     pub v: f64,
@@ -40,10 +51,6 @@ pub struct Odometry {
     pub w: f64,
     /// Pose by the robot's odometry.
     pub pose: Pose,
-    /// The command (v_ref [m/s], ω_ref [rad/s]) the robot acted on over the period before this
-    /// report, when it says so: a replayed log reports its recorded command (whatever it was
-    /// sent); `None` means "the command you sent".
-    pub applied: Option<(f64, f64)>,
 }
 
 /// What can go wrong while talking to a robot.
@@ -94,11 +101,16 @@ pub trait Robot {
     /// The control period Δt [s]: how often the robot reports and accepts a new command.
     fn period_s(&self) -> f64;
 
-    /// Sends the command v_ref [m/s], ω_ref [rad/s]; it holds until the next `send`.
+    /// Sends the command v_ref [m/s], ω_ref [rad/s], which holds until the next `send`, and
+    /// returns it **as the robot will act on it** (SI units) from the last report until the
+    /// next: after the backend's clamps and its protocol's rounding, or, for a replayed log,
+    /// the command the log recorded at the report last read (see the [module docs](self)).
+    /// This returned command, not the request, is the one to record.
     ///
     /// # Errors
-    /// [`RobotError::Io`] if the link fails.
-    fn send(&mut self, v_ref: f64, w_ref: f64) -> Result<(), RobotError>;
+    /// [`RobotError::Io`] if the link fails; [`RobotError::Setting`] for a command the backend
+    /// cannot send (e.g. not finite).
+    fn send(&mut self, v_ref: f64, w_ref: f64) -> Result<(f64, f64), RobotError>;
 
     /// Waits for the robot's next report (about one period after the previous one) and returns it.
     ///
@@ -107,11 +119,18 @@ pub trait Robot {
     /// problem; [`RobotError::Ended`] when a replayed log has no more samples.
     fn read(&mut self) -> Result<Odometry, RobotError>;
 
+    /// How the reported v, ω sample the motion: instants, or averages over the period that ends
+    /// at the report (wheel encoder counts differenced over a period, as most base controllers
+    /// report them). The default says instants.
+    fn velocity_sampling(&self) -> crate::VelocitySampling {
+        crate::VelocitySampling::Instant
+    }
+
     /// Stops the robot (zero command) and releases the link; the default sends (0, 0).
     ///
     /// # Errors
     /// As [`Robot::send`].
     fn stop(&mut self) -> Result<(), RobotError> {
-        self.send(0.0, 0.0)
+        self.send(0.0, 0.0).map(|_| ())
     }
 }

@@ -99,7 +99,7 @@ pub struct SimRobot {
     /// Wheel angles (right, left) [rad] and the ticks counted at the last sample.
     ang: [f64; 2],
     ticks: [f64; 2],
-    /// Odometry pose of the axle centre (x, y, φ).
+    /// Odometry pose of the axle centre (x, y, φ), `a` behind the point h.
     odom: [f64; 3],
     /// Commands waiting for their delay: (time they take effect, v_ref, ω_ref).
     queue: VecDeque<(f64, f64, f64)>,
@@ -113,7 +113,8 @@ pub struct SimRobot {
 }
 
 impl SimRobot {
-    /// A robot at rest at the origin, heading 0.
+    /// A robot at rest with the point h at the origin, heading 0; its odometry starts there too
+    /// (the axle centre `a` behind h, at (−a, 0)), so the first samples measure the true pose.
     ///
     /// # Errors
     /// [`Error::InvalidSetting`] for a bad θ, profile number, sub-step count or effect.
@@ -165,6 +166,7 @@ impl SimRobot {
             },
             sent: (0.0, 0.0),
         };
+        robot.odom = robot.axle_pose(&robot.s);
         robot.t = robot.jitter(0);
         robot.last.t = robot.t;
         Ok(robot)
@@ -180,8 +182,7 @@ impl SimRobot {
         let th = self.theta_at(self.t);
         self.command = [th[3] * v - th[2] * w * w, th[5] * w + th[4] * v * w];
         self.setpoint = self.command;
-        let a = self.profile.a;
-        self.odom = [x - a * psi.cos(), y - a * psi.sin(), psi];
+        self.odom = self.axle_pose(&state);
         self.last = Sample {
             t: self.t,
             v,
@@ -190,6 +191,14 @@ impl SimRobot {
             y,
             phi: psi,
         };
+    }
+
+    /// The pose (x, y, ψ) of the axle centre in `state`, whose (x, y) is the point h `a` ahead
+    /// of it: where the odometry starts.
+    fn axle_pose(&self, state: &[f64; 5]) -> [f64; 3] {
+        let [x, y, psi, ..] = *state;
+        let a = self.profile.a;
+        [x - a * psi.cos(), y - a * psi.sin(), psi]
     }
 
     /// The robot's profile.
@@ -390,9 +399,13 @@ impl SimRobot {
     }
 }
 
-/// The simulator as a robot backend (`[robot] type = "simulator"`): `send` holds the command,
-/// `read` advances one period ([`SimRobot::step`]) and reports what the encoders measured, on
-/// the simulation's clock.
+/// The simulator as a robot backend (`[robot] type = "simulator"`): `read` advances one period
+/// ([`SimRobot::step`]) under the command last sent (zero before the first `send`) and reports
+/// what the encoders measured, stamped with the simulation's time (the first `read` reports
+/// t_1 ≈ Δt, the robot having started at t_0 = 0 at rest); `send` holds the command for the next
+/// `read` and returns it unchanged: the simulated base acts on exactly what it is given (its
+/// [`Effects`] — saturation, delay, rate limit, … — are physics to identify, not a protocol's
+/// rounding).
 impl Robot for SimRobot {
     fn name(&self) -> &str {
         "simulator"
@@ -400,9 +413,18 @@ impl Robot for SimRobot {
     fn period_s(&self) -> f64 {
         self.profile.period_s
     }
-    fn send(&mut self, v_ref: f64, w_ref: f64) -> std::result::Result<(), RobotError> {
+    /// Window averages with the encoder model, instants without it.
+    fn velocity_sampling(&self) -> wheelid_core::VelocitySampling {
+        if self.encoders {
+            wheelid_core::VelocitySampling::WindowAverage
+        } else {
+            wheelid_core::VelocitySampling::Instant
+        }
+    }
+    /// Holds (v_ref, ω_ref) for the next period and returns it unchanged.
+    fn send(&mut self, v_ref: f64, w_ref: f64) -> std::result::Result<(f64, f64), RobotError> {
         self.sent = (v_ref, w_ref);
-        Ok(())
+        Ok(self.sent)
     }
     fn read(&mut self) -> std::result::Result<Odometry, RobotError> {
         let s = self.step(self.sent.0, self.sent.1);
@@ -415,7 +437,6 @@ impl Robot for SimRobot {
                 y: s.y,
                 heading: s.phi,
             },
-            applied: None,
         })
     }
 }
@@ -489,7 +510,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn as_a_robot_it_steps_like_step_with_the_command_it_was_sent() {
+    fn as_a_robot_it_steps_like_step_with_the_command_it_returned() {
         let profile = RobotProfile::pioneer3dx();
         let settings = SimSettings::default();
         let mut direct = SimRobot::new(&profile, &settings).expect("robot");
@@ -497,15 +518,28 @@ mod tests {
             Box::new(SimRobot::new(&profile, &settings).expect("robot"));
         assert_eq!(boxed.name(), "simulator");
         assert_eq!(boxed.period_s(), profile.period_s);
-        for k in 0..30 {
-            let (v_ref, w_ref) = (0.3 * (k as f64 * 0.2).sin(), 0.5);
-            boxed.send(v_ref, w_ref).expect("send");
+        // Read, then decide, then send: report k answers the command sent after report k − 1
+        // (zero before the first send).
+        let mut command = (0.0, 0.0);
+        for k in 1..=30 {
             let o = boxed.read().expect("read");
-            let s = direct.step(v_ref, w_ref);
-            assert_eq!((o.t, o.v, o.w), (s.t, s.v, s.w));
+            let s = direct.step(command.0, command.1);
+            assert_eq!((o.t, o.v, o.w), (s.t, s.v, s.w), "k = {k}");
             assert_eq!((o.pose.x, o.pose.y, o.pose.heading), (s.x, s.y, s.phi));
-            assert_eq!(o.applied, None);
+            assert!((o.t - k as f64 * profile.period_s).abs() < 1e-12);
+            let (v_ref, w_ref) = (0.3 * (k as f64 * 0.2).sin(), 0.5);
+            command = boxed.send(v_ref, w_ref).expect("send");
+            assert_eq!(
+                command,
+                (v_ref, w_ref),
+                "the simulator acts on the command as sent"
+            );
         }
+        assert!(
+            direct.true_state()[2] > 0.5,
+            "it turned: {:?}",
+            direct.true_state()
+        );
         // The command holds until the next send; stop sends zero.
         boxed.stop().expect("stop");
         for _ in 0..100 {
@@ -513,5 +547,49 @@ mod tests {
         }
         let o = boxed.read().expect("read");
         assert!(o.v.abs() < 0.01 && o.w.abs() < 0.02, "{o:?}");
+    }
+
+    /// With the tracked point h ahead of the axle (a ≠ 0), the odometry starts where the true
+    /// state is: the first samples of a robot at rest, then driving straight ahead, measure the
+    /// true x, y to the encoder resolution (no jump by `a` at the first sample).
+    #[test]
+    fn odometry_starts_at_the_true_pose_when_h_is_ahead_of_the_axle() {
+        let profile = RobotProfile {
+            a: 0.1,
+            ..RobotProfile::pioneer3dx()
+        };
+        let tick = 2.0 * std::f64::consts::PI * profile.wheel_radius / profile.ticks_per_rev;
+        for settings in [
+            SimSettings::default(),
+            SimSettings {
+                seed: 5,
+                ..SimSettings::default()
+            },
+        ] {
+            let mut robot = SimRobot::new(&profile, &settings).expect("robot");
+            let close = |robot: &SimRobot, k: usize| {
+                let (s, m) = (robot.true_state(), robot.sample());
+                // One tick per wheel of travel, and the heading it makes over the lever a.
+                let tol = 2.0 * tick * (1.0 + profile.a / profile.track);
+                assert!(
+                    (m.x - s[0]).abs() <= tol && (m.y - s[1]).abs() <= tol,
+                    "sample {k}: measured ({}, {}), true ({}, {})",
+                    m.x,
+                    m.y,
+                    s[0],
+                    s[1]
+                );
+            };
+            close(&robot, 0);
+            for k in 1..=5 {
+                robot.step(0.0, 0.0);
+                close(&robot, k);
+            }
+            for k in 6..=30 {
+                robot.step(0.3, 0.0);
+                close(&robot, k);
+            }
+            assert!(robot.true_state()[0] > 0.1, "{:?}", robot.true_state());
+        }
     }
 }

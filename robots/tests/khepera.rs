@@ -211,25 +211,50 @@ fn units_round_trip_to_the_protocol_resolution() {
 // ---------------------------------------------------------------------------------------------
 
 #[test]
-fn client_sends_the_hand_worked_lines_and_reports_the_applied_command() {
+fn client_sends_the_hand_worked_lines_and_returns_the_command_the_robot_acts_on() {
     let robot = robot_with_counters(vec![]);
     let settings = robot.settings(2.0);
     let mut k = Khepera::connect(&settings).expect("connect");
     assert_eq!(k.name(), "khepera");
     assert_eq!(k.period_s(), 0.02);
-    k.send(0.2, 2.0).expect("send");
+    let (va, wa) = k.send(0.2, 2.0).expect("send");
     assert_eq!(k.command(), Wheels::new(16057, 41547));
-    let o = k.read().expect("read");
-    assert_eq!((o.t, o.v, o.w), (0.02, 0.0, 0.0));
-    // The command as the robot got it: (16057 + 41547)/2 and (41547 − 16057)/d speed units.
-    let (va, wa) = o.applied.expect("applied");
+    // The command as the robot will act on it: (16057 + 41547)/2 and (41547 − 16057)/d speed
+    // units.
     assert!((va - (16057.0 + 41547.0) / 2.0 / KSPEED / 1000.0).abs() < 1e-15);
     assert!((wa - (41547.0 - 16057.0) / KSPEED / 1000.0 / TRACK).abs() < 1e-12);
+    // Here v comes back exactly (the two roundings cancel), ω does not.
+    assert!((wa - 2.0).abs() > 1e-6, "rounded: {wa}");
+    let o = k.read().expect("read");
+    assert_eq!((o.t, o.v, o.w), (0.02, 0.0, 0.0));
+    // A clamped right wheel (577 mm/s → 500 mm/s): the command returned is the clamped one,
+    // (32114 + 72005)/2 units forward, far from the 0.4 m/s and 4 rad/s asked for.
+    let (vc, wc) = k.send(0.4, 4.0).expect("send");
+    assert!((vc - (32114.0 + 72005.0) / 2.0 / KSPEED / 1000.0).abs() < 1e-15);
+    assert!((wc - (72005.0 - 32114.0) / KSPEED / 1000.0 / TRACK).abs() < 1e-12);
+    assert!(vc < 0.37 && wc < 3.2, "{vc} {wc}");
+    let o = k.read().expect("read");
+    assert_eq!(o.t, 0.04);
+    // Not finite: refused, nothing sent.
+    assert!(matches!(
+        k.send(0.0, f64::INFINITY),
+        Err(RobotError::Setting(_))
+    ));
     k.stop().expect("stop");
     drop(k);
     assert_eq!(
         robot.finish(),
-        ["D,l0,l0", "R", "D,l16057,l41547", "E", "R", "D,l0,l0"]
+        [
+            "D,l0,l0",
+            "R",
+            "D,l16057,l41547",
+            "E",
+            "R",
+            "D,l32114,l72005",
+            "E",
+            "R",
+            "D,l0,l0"
+        ]
     );
 }
 
@@ -384,17 +409,18 @@ fn a_lockstep_session_reports_what_the_simulator_does() {
     for k in 0..n {
         let t = k as f64 * 0.02;
         let (v_ref, w_ref) = rich_command(t);
-        robot.send(v_ref, w_ref).expect("send");
+        let returned = robot.send(v_ref, w_ref).expect("send");
         let o = robot.read().expect("read");
 
-        // By hand: each wheel in whole speed units, and back, as the robot receives it.
+        // By hand: each wheel in whole speed units, and back, as the robot receives it; `send`
+        // returns exactly that, and the simulator driven with it is what the robot does.
         let left = ((v_ref - TRACK * w_ref / 2.0) * 1000.0 * KSPEED).round();
         let right = ((v_ref + TRACK * w_ref / 2.0) * 1000.0 * KSPEED).round();
         let (vl, vr) = (left / KSPEED / 1000.0, right / KSPEED / 1000.0);
         let (v_cmd, w_cmd) = ((vr + vl) / 2.0, (vr - vl) / TRACK);
-        let s = direct.step(v_cmd, w_cmd);
+        assert_eq!(returned, (v_cmd, w_cmd), "k = {k}");
+        let s = direct.step(returned.0, returned.1);
 
-        assert_eq!(o.applied, Some((v_cmd, w_cmd)));
         assert!((o.t - (k + 1) as f64 * 0.02).abs() < 1e-12 && (o.t - s.t).abs() < 1e-12);
         max_dv = max_dv.max((o.v - s.v).abs());
         max_dw = max_dw.max((o.w - s.w).abs());

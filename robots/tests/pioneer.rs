@@ -314,14 +314,16 @@ fn on_the_wire(v_ref: f64, w_ref: f64) -> (f64, f64) {
 }
 
 /// Drives `robot` with `excitation` for `n` periods; returns the rows (report at t_k, command
-/// sent at t_k), starting with the report at t = 0.
+/// as the robot acts on it after report k, i.e. what `send` returned), starting with the
+/// report at t = 0 (the SIP read by `connect`).
 fn drive(robot: &mut Pioneer, excitation: &Excitation, n: usize) -> Vec<(Odometry, f64, f64)> {
     let mut rows = Vec::with_capacity(n + 1);
     let mut report = robot.last_report();
     for _ in 0..n {
         let (v_ref, w_ref) = excitation.at(report.t);
-        robot.send(v_ref, w_ref).expect("send");
-        rows.push((report, v_ref, w_ref));
+        let (v, w) = robot.send(v_ref, w_ref).expect("send");
+        assert_eq!((v, w), on_the_wire(v_ref, w_ref));
+        rows.push((report, v, w));
         report = robot.read().expect("read");
     }
     rows.push((report, 0.0, 0.0));
@@ -354,13 +356,14 @@ fn a_lockstep_session_follows_the_simulator_to_the_protocol_resolution() {
     let mut direct = SimRobot::new(&profile, &sim).expect("sim");
     let (dv, dw) = (0.5e-3, 1e-3 / profile.track); // half a mm/s; 1 mm/s over the track
     for k in 1..=300 {
+        // Report k − 1 is in (the first one from `connect`): decide, send, read report k.
         let (v_ref, w_ref) = excitation.at((k - 1) as f64 * 0.1);
-        robot.send(v_ref, w_ref).expect("send");
+        let (vq, wq) = robot.send(v_ref, w_ref).expect("send");
+        // `send` returns the command as the robot acts on it: whole mm/s and °/s.
+        assert_eq!((vq, wq), on_the_wire(v_ref, w_ref), "k = {k}");
         let o = robot.read().expect("read");
-        let (vq, wq) = on_the_wire(v_ref, w_ref);
         let s = direct.step(vq, wq);
         assert_eq!(o.t, k as f64 * 0.1);
-        assert_eq!(o.applied, Some((vq, wq)), "k = {k}");
         assert!(
             (o.v - s.v).abs() <= dv + 1e-12,
             "k = {k}: v {} vs {}",
@@ -484,12 +487,10 @@ fn identification_over_tcp_matches_the_directly_driven_simulator() {
     assert!(elapsed < Duration::from_secs(2), "{elapsed:?}");
     eprintln!("60 s lock-step session over TCP: {elapsed:?}");
 
+    // Each row's command is what `send` returned: the rounded command the robot acted on.
     let over_tcp: Vec<_> = rows
         .iter()
-        .map(|(o, v_ref, w_ref)| {
-            let (vq, wq) = on_the_wire(*v_ref, *w_ref);
-            (o.t, vq, wq, o.v, o.w)
-        })
+        .map(|(o, v, w)| (o.t, *v, *w, o.v, o.w))
         .collect();
     let mut direct = SimRobot::new(&profile, &sim).expect("sim");
     let mut directly = Vec::with_capacity(n + 1);
@@ -533,9 +534,10 @@ fn a_long_straight_run_crosses_the_15_bit_position_wrap() {
     let mut direct = SimRobot::new(&profile, &sim).expect("sim");
     let mut crossed = false;
     for _ in 0..300 {
-        robot.send(1.2, 0.0).expect("send");
+        let (v, w) = robot.send(1.2, 0.0).expect("send");
+        assert_eq!((v, w), (1.2, 0.0));
         let o = robot.read().expect("read");
-        let s = direct.step(1.2, 0.0);
+        let s = direct.step(v, w);
         assert!(
             (o.pose.x - s.x).abs() <= 0.5e-3 + 1e-9,
             "x {} vs {}",
@@ -558,17 +560,54 @@ fn read_without_send_pulses_and_the_command_holds() {
         ArcosServer::spawn(profile.clone(), sim.clone(), Pacing::LockStep).expect("server");
     let mut robot = Pioneer::connect(&settings_for(&server)).expect("connect");
     let mut direct = SimRobot::new(&profile, &sim).expect("sim");
-    robot.send(0.25, -0.3).expect("send");
-    let (vq, wq) = on_the_wire(0.25, -0.3);
+    let (vq, wq) = robot.send(0.25, -0.3).expect("send");
+    assert_eq!((vq, wq), on_the_wire(0.25, -0.3));
+    // 0.3 rad/s = 17.19°/s goes out as 17°/s.
+    assert_eq!(wq, -17f64.to_radians());
     for k in 1..=5 {
         // Only the first read follows a send; the others send a PULSE, which also advances the
-        // lock-step server.
+        // lock-step server, and the robot acts on the command `send` returned all along.
         let o = robot.read().expect("read");
         let s = direct.step(vq, wq);
         assert_eq!(o.t, k as f64 * 0.1);
-        assert_eq!(o.applied, Some((vq, wq)));
         assert!((o.v - s.v).abs() < 1e-9 && (o.w - s.w).abs() < 1e-9);
     }
+    assert_eq!(robot.command(), (250, -17));
+}
+
+/// With `max_v`/`max_w` set, `send` returns the clamped and rounded command, and that is what
+/// the robot acts on.
+#[test]
+fn send_returns_the_clamped_command_the_robot_acts_on() {
+    let profile = RobotProfile::pioneer3dx();
+    let sim = SimSettings::default();
+    let server =
+        ArcosServer::spawn(profile.clone(), sim.clone(), Pacing::LockStep).expect("server");
+    let settings = PioneerSettings {
+        max_v: Some(0.5),
+        max_w: Some(1.0),
+        ..settings_for(&server)
+    };
+    let mut robot = Pioneer::connect(&settings).expect("connect");
+    let mut direct = SimRobot::new(&profile, &sim).expect("sim");
+    // 0.9 m/s → 0.5 m/s = 500 mm/s; −3 rad/s → −1 rad/s = −57.3°/s → −57°/s.
+    let (v, w) = robot.send(0.9, -3.0).expect("send");
+    assert_eq!((v, w), (0.5, -57f64.to_radians()));
+    assert_eq!(robot.command(), (500, -57));
+    for _ in 0..20 {
+        let o = robot.read().expect("read");
+        let s = direct.step(v, w);
+        assert!((o.v - s.v).abs() <= 0.5e-3 + 1e-12, "{} vs {}", o.v, s.v);
+        assert!((o.w - s.w).abs() <= 1e-3 / profile.track + 1e-12);
+    }
+    assert!(robot.last_report().v > 0.4, "{:?}", robot.last_report());
+    // Not finite: refused, nothing sent.
+    assert!(matches!(
+        robot.send(f64::NAN, 0.0),
+        Err(RobotError::Setting(_))
+    ));
+    assert_eq!(robot.command(), (500, -57));
+    robot.stop().expect("stop");
 }
 
 #[test]

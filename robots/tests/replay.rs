@@ -132,18 +132,6 @@ fn settings(path: &Path) -> ReplaySettings {
     ReplaySettings::new(path)
 }
 
-/// Reads every sample of `robot` until `Ended`.
-fn drain(robot: &mut Replay) -> Vec<wheelid_core::Odometry> {
-    let mut out = Vec::new();
-    loop {
-        match robot.read() {
-            Ok(o) => out.push(o),
-            Err(RobotError::Ended) => return out,
-            Err(e) => panic!("unexpected error {e}"),
-        }
-    }
-}
-
 fn error_text(r: Result<impl std::fmt::Debug, RobotError>) -> (RobotError, String) {
     let e = r.expect_err("must fail");
     let s = e.to_string();
@@ -417,16 +405,25 @@ fn recording_round_trips_through_a_bag_with_twist_and_with_twist_stamped() {
         assert_eq!(back.meta("odometry_frames"), Some("odom / base_link"));
         assert_eq!(back.meta("t0_ns"), Some("0"));
         assert_abs_diff_eq!(robot.period_s(), rec.sampling().dt_median, epsilon = 1e-9);
-        // The robot interface replays the same numbers.
-        let samples = drain(&mut robot);
-        assert_eq!(samples.len(), rec.len());
-        let k = rec.len() - 1;
-        let last = samples[k];
-        assert_abs_diff_eq!(last.t, rec.t[k], epsilon = 1e-9);
-        assert_abs_diff_eq!(last.pose.heading, phi[k], epsilon = 1e-9);
-        let (vr, wr) = last.applied.expect("recorded command");
-        assert_abs_diff_eq!(vr, rec.v_ref[k], epsilon = 1e-12);
-        assert_abs_diff_eq!(wr, rec.w_ref[k], epsilon = 1e-12);
+        // The robot interface replays the same numbers: read sample k, and `send` returns
+        // the command logged with it (whatever is asked).
+        let mut n = 0;
+        loop {
+            let o = match robot.read() {
+                Ok(o) => o,
+                Err(RobotError::Ended) => break,
+                Err(e) => panic!("unexpected error {e}"),
+            };
+            let k = n;
+            n += 1;
+            assert_abs_diff_eq!(o.t, rec.t[k], epsilon = 1e-9);
+            assert_abs_diff_eq!(o.pose.heading, phi[k], epsilon = 1e-9);
+            let (vr, wr) = robot.send(-1.0, 7.0).expect("send");
+            assert_abs_diff_eq!(vr, rec.v_ref[k], epsilon = 1e-12);
+            assert_abs_diff_eq!(wr, rec.w_ref[k], epsilon = 1e-12);
+        }
+        assert_eq!(n, rec.len());
+        assert_eq!(robot.sent().len(), rec.len());
     }
     // Stamped commands also read by their header stamps, which equal the log times here.
     let path = dir.path().join("TwistStamped.mcap");
@@ -744,24 +741,29 @@ fn csv_replay_reports_samples_in_order_then_ended() {
         (0.2, 0.09, 0.2, (0.006, 0.0001, 0.03), (0.3, -0.5)),
         (0.35, 0.12, 0.1, (0.015, 0.0003, 0.05), (0.0, 0.0)),
     ];
-    for (k, (t, v, w, (x, y, phi), applied)) in expected.into_iter().enumerate() {
-        // Whatever is sent, the replay reports the recorded command.
-        robot.send(9.0 + k as f64, -9.0).expect("send");
+    // Before the first read, `send` returns the first sample's logged command.
+    assert_eq!(robot.send(8.0, -9.0).expect("send"), (0.4, 0.75));
+    for (k, (t, v, w, (x, y, phi), logged)) in expected.into_iter().enumerate() {
         let o = robot.read().expect("sample");
         assert_eq!((o.t, o.v, o.w), (t, v, w));
         assert_eq!((o.pose.x, o.pose.y, o.pose.heading), (x, y, phi));
-        assert_eq!(o.applied, Some(applied));
+        // Whatever is sent, `send` returns the command logged with the sample just read.
+        assert_eq!(robot.send(9.0 + k as f64, -9.0).expect("send"), logged);
     }
     assert!(matches!(robot.read(), Err(RobotError::Ended)));
     assert!(matches!(robot.read(), Err(RobotError::Ended)));
+    // After the end, still the last sample's.
+    assert_eq!(robot.send(13.0, -9.0).expect("send"), (0.0, 0.0));
     robot.stop().expect("stop");
     assert_eq!(
         robot.sent(),
         &[
+            (8.0, -9.0),
             (9.0, -9.0),
             (10.0, -9.0),
             (11.0, -9.0),
             (12.0, -9.0),
+            (13.0, -9.0),
             (0.0, 0.0)
         ]
     );
@@ -780,9 +782,13 @@ fn a_replay_is_a_boxed_robot_and_reports_zero_pose_without_pose_columns() {
     .expect("valid");
     let mut robot: Box<dyn Robot> = Box::new(Replay::new(rec).expect("replay"));
     assert_abs_diff_eq!(robot.period_s(), 0.02, epsilon = 1e-15);
+    assert_eq!(robot.send(0.0, 0.0).expect("send"), (1.0, 0.0)); // sample 0, before a read
     let o = robot.read().expect("sample");
     assert_eq!((o.pose.x, o.pose.y, o.pose.heading), (0.0, 0.0, 0.0));
-    assert_eq!(o.applied, Some((1.0, 0.0)));
+    assert_eq!(robot.send(0.0, 0.0).expect("send"), (1.0, 0.0)); // sample 0, just read
+    robot.read().expect("sample");
+    assert_eq!(robot.send(0.0, 0.0).expect("send"), (2.0, 0.0)); // sample 1
+    robot.stop().expect("stop");
 }
 
 #[test]

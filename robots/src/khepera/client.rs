@@ -205,12 +205,17 @@ impl Odometer {
 
 /// A Khepera III driven over its serial text protocol (see the [module docs](super)).
 ///
-/// `send` writes `D` with the rounded, clamped wheel speeds and waits for `d`; `read` waits for
-/// the next period (when [`KheperaSettings::realtime`]), asks `E` (wheel speeds → v, ω) and `R`
-/// (position counters → pose by [`Odometer`]). Reports are stamped t = k·Δt for the k-th read
-/// (nominal sampling times, not the host clock). Each report's `applied` is the command as the
-/// robot received it: the sent (v_ref, ω_ref) after rounding each wheel to whole speed units and
-/// clamping it to `max_wheel_speed`.
+/// `send` writes `D` with the rounded, clamped wheel speeds, waits for `d`, and returns the
+/// command as the robot will act on it: the wheel speeds v_ref ∓ dω_ref/2, each clamped to
+/// `max_wheel_speed` and rounded to whole speed units, turned back into
+/// (v, ω) = ((v_r + v_l)/2, (v_r − v_l)/d) ([`Units::velocity_of_units`]). `read` waits for the
+/// next period (when [`KheperaSettings::realtime`]), asks `E` (wheel speeds → v, ω) and `R`
+/// (position counters → pose by [`Odometer`]).
+///
+/// Timestamps (the robot's clock of [`Odometry::t`]): reports counted × period, t = k ·
+/// `period_s` for the k-th report — [`Khepera::connect`] is t = 0 (no report), the first `read`
+/// is report 1 at t = Δt. Deterministic, not the host's clock (which only paces the reads when
+/// `realtime`, see [`Khepera::late_reads`]).
 ///
 /// Dropping the client sends `D,l0,l0` (without waiting for the answer) unless the last command
 /// already was a stop.
@@ -220,9 +225,8 @@ pub struct Khepera {
     units: Units,
     odometer: Odometer,
     reads: u64,
-    /// The command in force, as sent (speed units) and as (v, ω).
+    /// The command in force, as sent (speed units).
     command: Wheels<i32>,
-    applied: (f64, f64),
     /// When the last read was due (host clock), for [`KheperaSettings::realtime`].
     due: Instant,
     late_reads: u64,
@@ -279,7 +283,6 @@ impl Khepera {
             odometer: Odometer::new(units, counters, Pose::default()),
             reads: 0,
             command: Wheels::default(),
-            applied: (0.0, 0.0),
             due: Instant::now(),
             late_reads: 0,
         })
@@ -353,13 +356,20 @@ impl Robot for Khepera {
         self.settings.period_s
     }
 
+    /// Window averages: the motor controllers' speeds are encoder counts over their sampling
+    /// interval (and the loopback server reports the simulator's period averages).
+    fn velocity_sampling(&self) -> wheelid_core::VelocitySampling {
+        wheelid_core::VelocitySampling::WindowAverage
+    }
+
     /// Writes `D,l<left>,l<right>` with the wheel speeds v_ref ∓ dω_ref/2 in whole speed units
-    /// (clamped to `max_wheel_speed`) and waits for `d`.
+    /// (clamped to `max_wheel_speed`), waits for `d`, and returns the command as the robot will
+    /// act on it: (v, ω) of those integer wheel speeds ([`Units::velocity_of_units`]).
     ///
     /// # Errors
     /// [`RobotError::Setting`] for a non-finite command (nothing is sent); link and protocol
     /// errors as [`Khepera::connect`].
-    fn send(&mut self, v_ref: f64, w_ref: f64) -> Result<(), RobotError> {
+    fn send(&mut self, v_ref: f64, w_ref: f64) -> Result<(f64, f64), RobotError> {
         if !(v_ref.is_finite() && w_ref.is_finite()) {
             return Err(RobotError::Setting(format!(
                 "khepera: command v_ref = {v_ref}, w_ref = {w_ref} is not finite"
@@ -370,8 +380,7 @@ impl Robot for Khepera {
         let answer = self.channel.request(&command)?;
         expect_ack(&command, answer)?;
         self.command = wheels;
-        self.applied = self.units.velocity_of_units(wheels);
-        Ok(())
+        Ok(self.units.velocity_of_units(wheels))
     }
 
     /// Waits for the next period (if `realtime`), then `E` → v, ω and `R` → pose.
@@ -398,13 +407,12 @@ impl Robot for Khepera {
             v,
             w,
             pose,
-            applied: Some(self.applied),
         })
     }
 
     /// Sends `D,l0,l0` and waits for `d`; the link stays open until the client is dropped.
     fn stop(&mut self) -> Result<(), RobotError> {
-        self.send(0.0, 0.0)
+        self.send(0.0, 0.0).map(|_| ())
     }
 }
 

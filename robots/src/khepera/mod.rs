@@ -73,9 +73,11 @@
 //! each clamped to ±`max_wheel_speed`, times 1000 · `speed_units_per_mm_s`, rounded to the
 //! nearest integer (half away from zero): v_ref = 0.1 m/s, ω_ref = 0 → `D,l14401,l14401`.
 //! `read`: `E` → wheel speeds → v = (v_r + v_l)/2, ω = (v_r − v_l)/d; `R` → counter changes →
-//! pose by eq. 3.2–3.3. Timestamps are nominal: the k-th read is stamped t = k·`period_s`
-//! (deterministic, as the simulator's clock; with `realtime` the client waits for each period
-//! on the host's monotonic clock and counts [`Khepera::late_reads`]).
+//! pose by eq. 3.2–3.3. `send` returns the command as the robot will act on it: (v, ω) of the
+//! rounded, clamped wheel speeds it sent, the one to record. Time: reports counted × period,
+//! t = k·`period_s` for the k-th read (deterministic, not the host's clock; with `realtime`
+//! the client waits for each period on the host's monotonic clock and counts
+//! [`Khepera::late_reads`]; see [`Khepera`]).
 
 pub mod client;
 pub mod codec;

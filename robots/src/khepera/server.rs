@@ -76,14 +76,8 @@ impl KheperaServer {
         sim: SimSettings,
         pacing: Pacing,
     ) -> io::Result<ServerHandle> {
-        let mut robot = SimRobot::new(&profile, &sim)
+        let robot = SimRobot::new(&profile, &sim)
             .map_err(|e| io::Error::new(io::ErrorKind::InvalidInput, e.to_string()))?;
-        if profile.a != 0.0 {
-            // `SimRobot::new` starts its odometry with the axle at the origin while its first
-            // sample puts the point h there; placing it at rest at the origin makes both agree
-            // (the axle `a` behind h), so the first period's wheel travel is not off by `a`.
-            robot.set_state([0.0; 5]);
-        }
         let units = Units::from_profile(&profile);
         let listener = TcpListener::bind("127.0.0.1:0")?;
         listener.set_nonblocking(true)?;
@@ -396,8 +390,9 @@ mod tests {
             a: 0.03,
             ..RobotProfile::khepera3()
         };
-        let mut robot = SimRobot::new(&profile, &SimSettings::default()).expect("sim");
-        robot.set_state([0.0; 5]); // as `KheperaServer::spawn` does for a ≠ 0
+        // As `KheperaServer::spawn` makes it: `SimRobot::new` starts its odometry consistent
+        // with the point h at the origin, so the first period's travel is not off by `a`.
+        let robot = SimRobot::new(&profile, &SimSettings::default()).expect("sim");
         let units = Units::from_profile(&profile);
         let mut session = Session::new(robot, units, Pacing::LockStep);
         // The client's odometer follows the axle, which starts `a` behind h.

@@ -107,6 +107,11 @@ pub fn quantize_command(
     ))
 }
 
+/// A command in protocol units (VEL [mm/s], RVEL [°/s]) in SI units (m/s, rad/s).
+fn command_si(vel: i16, rvel: i16) -> (f64, f64) {
+    (f64::from(vel) / 1000.0, f64::from(rvel).to_radians())
+}
+
 /// A byte link to the robot whose reads can time out: a TCP socket or a serial port.
 pub trait Link: Read + Write + Send {
     /// Sets how long one `read` may block (> 0).
@@ -179,13 +184,17 @@ pub struct RobotIdentity {
 /// A Pioneer driven over ARCOS: [`Robot::send`] writes VEL and RVEL, [`Robot::read`] returns the
 /// next standard SIP as [`Odometry`].
 ///
-/// * Timestamps: `t` = (number of SIPs received since the first) × `period_s`. SIPs come on
-///   the firmware's fixed cycle, so the count is the robot's clock; a session replayed
-///   against the lock-step loopback server gives bit-for-bit the same reports. Only valid
-///   standard SIPs count: a SIP lost to a bad checksum (reported by `read` as
-///   [`RobotError::Protocol`]) shifts the later timestamps by one period.
-/// * `applied`: the command in force over the period before the report, as the robot got it
-///   (after clamping and rounding to whole mm/s and °/s).
+/// * Timestamps (the robot's clock of [`Odometry::t`]): reports counted × period, t = k ·
+///   `period_s` for the k-th report — the first SIP, at [`Pioneer::connect`], is report 0
+///   (t = 0, [`Pioneer::last_report`]), the first `read` report 1. Deterministic, not the
+///   host's clock: SIPs come on the firmware's fixed cycle, so the count is the robot's clock,
+///   and a session replayed against the lock-step loopback server gives bit-for-bit the same
+///   reports. Only valid standard SIPs count: a SIP lost to a bad checksum (reported by `read`
+///   as [`RobotError::Protocol`]) shifts the later timestamps by one period.
+/// * `send` returns the command as the robot will act on it: the request clamped to
+///   `max_v`/`max_w`, rounded to whole mm/s and °/s and clamped to ±32767 as the protocol
+///   carries it ([`quantize_command`]), converted back to m/s and rad/s. (The firmware's own
+///   velocity limits, which the client does not know, may still cut it.)
 /// * Watchdog: ARCOS stops the robot when no command arrives for its watchdog time (2 s by
 ///   default); `read` sends a PULSE when no command went out since the previous `read`.
 /// * Dropping a `Pioneer` that was not stopped sends VEL 0, RVEL 0, CLOSE (best effort).
@@ -247,7 +256,6 @@ impl Pioneer {
                 v: 0.0,
                 w: 0.0,
                 pose: Default::default(),
-                applied: Some((0.0, 0.0)),
             },
             sips: 0,
             command: (0, 0),
@@ -259,13 +267,7 @@ impl Pioneer {
         robot.write(&open, "sending OPEN and ENABLE 1")?;
         let sip = robot.next_sip("waiting for the first SIP")?;
         let (v, w, pose) = robot.odometer.update(&sip);
-        robot.last = Odometry {
-            t: 0.0,
-            v,
-            w,
-            pose,
-            applied: Some((0.0, 0.0)),
-        };
+        robot.last = Odometry { t: 0.0, v, w, pose };
         robot.last_sip = sip;
         Ok(robot)
     }
@@ -457,16 +459,27 @@ impl Robot for Pioneer {
         self.settings.period_s
     }
 
+    /// Window averages: the SIP's wheel velocities are the firmware's encoder counts over its
+    /// cycle (MobileSim and the loopback server report the simulator's period averages).
+    fn velocity_sampling(&self) -> wheelid_core::VelocitySampling {
+        wheelid_core::VelocitySampling::WindowAverage
+    }
+
     /// Writes VEL (v_ref in whole mm/s) and RVEL (ω_ref in whole °/s), see
-    /// [`quantize_command`].
-    fn send(&mut self, v_ref: f64, w_ref: f64) -> Result<(), RobotError> {
+    /// [`quantize_command`], and returns that command as the robot will act on it:
+    /// (VEL/1000 m/s, RVEL·π/180 rad/s).
+    ///
+    /// # Errors
+    /// [`RobotError::Setting`] for a non-finite command (nothing is sent);
+    /// [`RobotError::Io`] if the link fails; [`RobotError::Protocol`] after [`Robot::stop`].
+    fn send(&mut self, v_ref: f64, w_ref: f64) -> Result<(f64, f64), RobotError> {
         let (vel, rvel) = quantize_command(v_ref, w_ref, &self.settings)?;
         let mut bytes = Packet::command_int(cmd::VEL, i32::from(vel)).to_bytes();
         bytes.extend(Packet::command_int(cmd::RVEL, i32::from(rvel)).to_bytes());
         self.write(&bytes, "sending VEL and RVEL")?;
         self.command = (vel, rvel);
         self.sent_since_read = true;
-        Ok(())
+        Ok(command_si(vel, rvel))
     }
 
     /// Waits for the next standard SIP (other packet types are skipped), sending a PULSE first
@@ -483,13 +496,11 @@ impl Robot for Pioneer {
         let sip = self.next_sip("waiting for a SIP")?;
         self.sips += 1;
         let (v, w, pose) = self.odometer.update(&sip);
-        let (vel, rvel) = self.command;
         self.last = Odometry {
             t: self.sips as f64 * self.settings.period_s,
             v,
             w,
             pose,
-            applied: Some((f64::from(vel) / 1000.0, f64::from(rvel).to_radians())),
         };
         self.last_sip = sip;
         Ok(self.last)

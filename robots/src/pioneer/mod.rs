@@ -3,7 +3,8 @@
 //! * [`arcos`] — the packet codec: frames and checksum, client commands, the standard SIP,
 //!   and the conversions from its integer fields to SI units ([`arcos::Odometer`]).
 //! * [`Pioneer`] ([`client`]) — the [`Robot`](wheelid_core::Robot) backend:
-//!   `Pioneer::connect(&PioneerSettings)`, then `send(v_ref, w_ref)` / `read()` once per SIP.
+//!   `Pioneer::connect(&PioneerSettings)` (which reads SIP 0, the report at t = 0), then
+//!   `send(v_ref, w_ref)` / `read()` once per SIP.
 //! * [`ArcosServer`] ([`server`]) — an ARCOS-speaking server on top of the simulator, for
 //!   tests and demos, as MobileSim is for ARIA; [`Pacing::LockStep`] makes a session
 //!   deterministic and as fast as the CPU allows.
@@ -36,12 +37,14 @@
 //!
 //! * Commands: VEL = round(1000 v_ref) mm/s, RVEL = round(ω_ref·180/π) °/s, each clamped to
 //!   ±32767 ([`quantize_command`]): the protocol's resolution is 1 mm/s and 1 °/s
-//!   (0.01745 rad/s).
+//!   (0.01745 rad/s). `send` returns the command as the robot will act on it,
+//!   (VEL/1000 m/s, RVEL·π/180 rad/s), the one to record.
 //! * Reports: v = (L VEL + R VEL)/2 mm/s, ω = (R VEL − L VEL)/d with d =
 //!   [`PioneerSettings::track_m`] — the wheel velocities of every ARCOS version rather than the
 //!   ROTVEL field (0.1 °/s) of later ones; x, y from the 15-bit XPOS, YPOS counters \[mm\],
 //!   unwrapped; heading from THPOS in units of 2π/4096 rad, unwrapped.
-//! * Time: t = k · `period_s` for the k-th SIP after the first (see [`Pioneer`]).
+//! * Time: reports counted × period, t = k · `period_s` for the k-th SIP after the first
+//!   (deterministic, not the host's clock; see [`Pioneer`]).
 
 pub mod arcos;
 pub mod client;

@@ -3,10 +3,11 @@
 //! A [`Replay`] plays back a [`Recording`] — read from our CSV format
 //! (`shared/data/RECORDING_FORMAT.md`) or from a ROS 2 bag in MCAP ([`read_mcap`]) — one
 //! sample per [`Robot::read`], then [`RobotError::Ended`]. It cannot act on commands: `send`
-//! is accepted and ignored (the commands are kept, see [`Replay::sent`]), and each report
-//! carries the recorded command in [`Odometry::applied`], so a run identifies the robot from
-//! what it was really commanded. [`write_mcap`] writes a recording as a ROS 2 bag, for tests
-//! and for tools that read bags.
+//! is accepted but changes nothing (the requests are kept, see [`Replay::sent`]), and it
+//! returns the command the log recorded at the sample last read — the one the robot acted on
+//! from that sample to the next — so a run identifies the robot from what it was really
+//! commanded. [`write_mcap`] writes a recording as a ROS 2 bag, for tests and for tools that
+//! read bags.
 //!
 //! [`ReplaySettings`] in TOML:
 //!
@@ -241,11 +242,15 @@ fn bag_file(path: &Path) -> Result<PathBuf, RobotError> {
 
 /// A recording played back as a robot.
 ///
-/// `read` returns sample k = 0, 1, … of the recording: t_k, v_k, ω_k, the pose (x_k, y_k, φ_k;
-/// zero where the recording has no pose columns), and `applied = Some((v_ref_k, ω_ref_k))`,
-/// the command recorded at t_k (held over [t_k, t_{k+1}) under `command_hold: zoh`); after the
-/// last sample, [`RobotError::Ended`], every time. `send` cannot change a recording: it is
-/// accepted, ignored and kept in [`Replay::sent`].
+/// `read` returns sample k = 0, 1, … of the recording: t_k on the log's clock (the robot's
+/// clock of [`Odometry::t`]), v_k, ω_k and the pose (x_k, y_k, φ_k; zero where the recording
+/// has no pose columns); after the last sample, [`RobotError::Ended`], every time.
+///
+/// `send` cannot change a recording: the request is kept in [`Replay::sent`], and `send`
+/// returns the **logged** command (v_ref_k, ω_ref_k) of the sample k last read, whatever was
+/// requested — the command the robot acted on from t_k to t_{k+1} (held under
+/// `command_hold: zoh`). Before the first `read` it returns sample 0's command, and after the
+/// end the last sample's.
 #[derive(Debug, Clone)]
 pub struct Replay {
     rec: Recording,
@@ -292,7 +297,8 @@ impl Replay {
         &self.rec
     }
 
-    /// The commands (v_ref [m/s], ω_ref [rad/s]) sent so far, in order, one per `send`.
+    /// The commands (v_ref [m/s], ω_ref [rad/s]) requested so far, in order, one per `send`
+    /// (including `stop`'s (0, 0)); what `send` returned is the log's, not these.
     pub fn sent(&self) -> &[(f64, f64)] {
         &self.sent
     }
@@ -308,10 +314,18 @@ impl Robot for Replay {
         self.period_s
     }
 
-    /// Keeps the command in [`Replay::sent`]; a recording does not change.
-    fn send(&mut self, v_ref: f64, w_ref: f64) -> Result<(), RobotError> {
+    /// As the log says (its `velocity_sampling` metadata).
+    fn velocity_sampling(&self) -> wheelid_core::VelocitySampling {
+        self.recording().velocity_sampling()
+    }
+
+    /// Keeps the request in [`Replay::sent`] (a recording does not change) and returns the
+    /// logged command (v_ref_k, ω_ref_k) of the sample k last read (sample 0 before any read).
+    fn send(&mut self, v_ref: f64, w_ref: f64) -> Result<(f64, f64), RobotError> {
         self.sent.push((v_ref, w_ref));
-        Ok(())
+        // `Replay::new` guarantees at least two samples, and `next` never exceeds their count.
+        let k = self.next.saturating_sub(1);
+        Ok((self.rec.v_ref[k], self.rec.w_ref[k]))
     }
 
     fn read(&mut self) -> Result<Odometry, RobotError> {
@@ -331,7 +345,6 @@ impl Robot for Replay {
                 y: at(&r.y),
                 heading: at(&r.phi),
             },
-            applied: Some((r.v_ref[k], r.w_ref[k])),
         })
     }
 }

@@ -1,0 +1,639 @@
+//! Config-driven runs (`wheelid run CONFIG.toml`): one TOML file describes a whole
+//! identification — robot backend, excitation, duration, model, solver and bounds,
+//! conditioning, outputs — and the run walks the layers once: **drive** the robot (read, then
+//! send, once per period) → **record** → **identify** → **write** the recording (CSV), the
+//! identified model (TOML) and the report (text and JSON).
+//!
+//! ```toml
+//! plugins = ["target/debug/libwheelid_turtlebot_plugin.so"]  # optional; relative to this file
+//! duration_s = 120.0
+//!
+//! [robot]                 # type: simulator | replay | pioneer | khepera | a plugin's
+//! type = "simulator"
+//! robot = "pioneer3dx"    # built-in profile (or a whole [robot.profile] table)
+//! [robot.simulation]
+//! seed = 3
+//!
+//! [excitation]            # the commands sent (a replayed log keeps its own)
+//! type = "thesis_pioneer"
+//!
+//! [model]                 # type: vw-pd | wheel-pd | a plugin's
+//! type = "vw-pd"
+//!
+//! [solver]                # type: ols | box (with bounds) | a plugin's
+//! type = "box"
+//! theta_lower = [0.05, 0.05, -0.1, 0.5, -0.5, 0.5]
+//! theta_upper = [1.0, 1.0, 0.1, 1.5, 0.5, 1.5]
+//!
+//! [identify]              # estimator (ls | iv | oe) and conditioning
+//! estimator = "ls"
+//! cutoff_hz = 1.0
+//!
+//! [output]
+//! dir = "run-out"         # recording.csv, model.toml, report.txt, report.json
+//! ```
+//!
+//! Built-in robots, models and solvers are chosen by their `type` through typetag
+//! ([`RobotSpec`], [`ModelSpec`], [`SolverSpec`]); a `type` that no built-in has goes to the
+//! plugins ([`crate::plugins`]), which get the table as TOML text. An unknown `type` is an
+//! error listing the known ones; a misspelled key is an error naming its line.
+//!
+//! The Pioneer and Khepera backends accept `port = "loopback"`: the run then starts the
+//! project's protocol server on top of the simulator ([`wheelid_robots::pioneer::ArcosServer`],
+//! [`wheelid_robots::khepera::KheperaServer`]) on a free loopback port, in lock-step, and
+//! drives the robot through it — the whole protocol stack without hardware.
+
+use std::fmt::Debug;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context as _, Result, anyhow, bail};
+use indicatif::{ProgressBar, ProgressStyle};
+use serde::Deserialize;
+use wheelid_core::{ConditionSettings, Recording, RegressorModel, Robot, RobotError, Solver};
+use wheelid_robots::khepera::{Khepera, KheperaServer, KheperaSettings};
+use wheelid_robots::pioneer::{ArcosServer, Pioneer, PioneerSettings};
+use wheelid_robots::replay::{Replay, ReplaySettings};
+use wheelid_robots::{RobotProfile, SimRobot, SimSettings};
+
+use crate::config::{ExcitationConfig, robot_profile};
+use crate::files::{ModelFile, toml_msg};
+use crate::identify::{Estimator, Identification, IdentifySettings, identify};
+use crate::plugins::{BuiltIn, Plugins};
+
+/// Where a spec's relative paths are resolved.
+pub struct RunContext<'a> {
+    /// The configuration file's directory.
+    pub base: &'a Path,
+}
+
+/// A built-in robot backend's config table (`[robot] type = "…"`).
+#[typetag::deserialize(tag = "type")]
+pub trait RobotSpec: Debug {
+    /// Connects to (or starts) the robot.
+    ///
+    /// # Errors
+    /// The backend's, naming the port or file.
+    fn connect(&self, cx: &RunContext<'_>) -> Result<Box<dyn Robot>>;
+}
+
+/// A built-in model's config table (`[model] type = "…"`).
+#[typetag::deserialize(tag = "type")]
+pub trait ModelSpec: Debug {
+    /// The model.
+    fn build(&self) -> Box<dyn RegressorModel>;
+}
+
+/// A solver and the bounds on θ it keeps (if any).
+pub type SolverWithBounds = (Box<dyn Solver>, Option<Vec<(f64, f64)>>);
+
+/// A built-in solver's config table (`[solver] type = "…"`).
+#[typetag::deserialize(tag = "type")]
+pub trait SolverSpec: Debug {
+    /// The solver, and the bounds on θ it keeps (if any).
+    ///
+    /// # Errors
+    /// Inconsistent bounds.
+    fn build(&self) -> Result<SolverWithBounds>;
+}
+
+/// The built-in robot types.
+pub const ROBOT_TYPES: [&str; 4] = ["simulator", "replay", "pioneer", "khepera"];
+/// The built-in model types.
+pub const MODEL_TYPES: [&str; 2] = ["vw-pd", "wheel-pd"];
+/// The built-in solver types.
+pub const SOLVER_TYPES: [&str; 2] = ["ols", "box"];
+
+/// `[robot] type = "simulator"`: the simulated robot of eq. 2.19 with encoders and optional
+/// effects.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SimulatorSpec {
+    /// Built-in profile name (default `pioneer3dx`).
+    pub robot: Option<String>,
+    /// A whole profile instead.
+    pub profile: Option<RobotProfile>,
+    /// Seed, sub-steps, encoder model, effects (`duration_s` is the run's).
+    #[serde(default)]
+    pub simulation: SimSettings,
+}
+
+#[typetag::deserialize(name = "simulator")]
+impl RobotSpec for SimulatorSpec {
+    fn connect(&self, _: &RunContext<'_>) -> Result<Box<dyn Robot>> {
+        let profile = robot_profile(None, self.robot.as_deref(), self.profile.as_ref())?;
+        Ok(Box::new(SimRobot::new(&profile, &self.simulation)?))
+    }
+}
+
+#[typetag::deserialize(name = "replay")]
+impl RobotSpec for ReplaySettings {
+    fn connect(&self, cx: &RunContext<'_>) -> Result<Box<dyn Robot>> {
+        let mut s = self.clone();
+        s.path = cx.base.join(&s.path);
+        Ok(Box::new(Replay::open(&s)?))
+    }
+}
+
+/// A robot and the loopback server it talks to (stopped when the robot is dropped).
+struct WithServer<R, H> {
+    robot: R,
+    _server: H,
+}
+
+impl<R: Robot, H> Robot for WithServer<R, H> {
+    fn name(&self) -> &str {
+        self.robot.name()
+    }
+    fn period_s(&self) -> f64 {
+        self.robot.period_s()
+    }
+    fn velocity_sampling(&self) -> wheelid_core::VelocitySampling {
+        self.robot.velocity_sampling()
+    }
+    fn send(&mut self, v_ref: f64, w_ref: f64) -> Result<(f64, f64), RobotError> {
+        self.robot.send(v_ref, w_ref)
+    }
+    fn read(&mut self) -> Result<wheelid_core::Odometry, RobotError> {
+        self.robot.read()
+    }
+    fn stop(&mut self) -> Result<(), RobotError> {
+        self.robot.stop()
+    }
+}
+
+/// The port value that starts the project's loopback server.
+const LOOPBACK: &str = "loopback";
+
+#[typetag::deserialize(name = "pioneer")]
+impl RobotSpec for PioneerSettings {
+    fn connect(&self, _: &RunContext<'_>) -> Result<Box<dyn Robot>> {
+        if self.port == LOOPBACK {
+            let server = ArcosServer::spawn(
+                RobotProfile::pioneer3dx(),
+                SimSettings::default(),
+                wheelid_robots::pioneer::Pacing::LockStep,
+            )
+            .context("starting the ARCOS loopback server")?;
+            let settings = PioneerSettings {
+                port: server.url(),
+                ..self.clone()
+            };
+            let robot = Pioneer::connect(&settings)?;
+            return Ok(Box::new(WithServer {
+                robot,
+                _server: server,
+            }));
+        }
+        Ok(Box::new(Pioneer::connect(self)?))
+    }
+}
+
+#[typetag::deserialize(name = "khepera")]
+impl RobotSpec for KheperaSettings {
+    fn connect(&self, _: &RunContext<'_>) -> Result<Box<dyn Robot>> {
+        if self.port == LOOPBACK {
+            let server = KheperaServer::spawn(
+                RobotProfile::khepera3(),
+                SimSettings::default(),
+                wheelid_robots::khepera::Pacing::LockStep,
+            )
+            .context("starting the Khepera loopback server")?;
+            let settings = KheperaSettings {
+                port: server.url(),
+                ..self.clone()
+            };
+            let robot = Khepera::connect(&settings)?;
+            return Ok(Box::new(WithServer {
+                robot,
+                _server: server,
+            }));
+        }
+        Ok(Box::new(Khepera::connect(self)?))
+    }
+}
+
+/// `[model] type = "vw-pd"`: eq. 2.19 with PD control on v and ω (Appendix A.3).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct VwPdSpec {}
+
+#[typetag::deserialize(name = "vw-pd")]
+impl ModelSpec for VwPdSpec {
+    fn build(&self) -> Box<dyn RegressorModel> {
+        Box::new(wheelid_models::VwPd)
+    }
+}
+
+/// `[model] type = "wheel-pd"`: eq. 2.19 with PD control on each wheel (§2.2).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WheelPdSpec {}
+
+#[typetag::deserialize(name = "wheel-pd")]
+impl ModelSpec for WheelPdSpec {
+    fn build(&self) -> Box<dyn RegressorModel> {
+        Box::new(wheelid_models::WheelPd)
+    }
+}
+
+/// `[solver] type = "ols"`: ordinary least squares.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OlsSpec {}
+
+#[typetag::deserialize(name = "ols")]
+impl SolverSpec for OlsSpec {
+    fn build(&self) -> Result<SolverWithBounds> {
+        Ok((Box::new(wheelid_solvers::Ols::default()), None))
+    }
+}
+
+/// `[solver] type = "box"`: least squares with θ kept in [lower, upper] (Clarabel).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BoxSpec {
+    /// Lower bounds, one per θ.
+    pub theta_lower: Vec<f64>,
+    /// Upper bounds, one per θ.
+    pub theta_upper: Vec<f64>,
+}
+
+#[typetag::deserialize(name = "box")]
+impl SolverSpec for BoxSpec {
+    fn build(&self) -> Result<SolverWithBounds> {
+        if self.theta_lower.len() != self.theta_upper.len() {
+            bail!(
+                "theta_lower has {} values, theta_upper {}",
+                self.theta_lower.len(),
+                self.theta_upper.len()
+            );
+        }
+        let bounds: Vec<(f64, f64)> = self
+            .theta_lower
+            .iter()
+            .copied()
+            .zip(self.theta_upper.iter().copied())
+            .collect();
+        if let Some(i) = bounds.iter().position(|(lo, hi)| {
+            !matches!(
+                lo.partial_cmp(hi),
+                Some(std::cmp::Ordering::Less | std::cmp::Ordering::Equal)
+            )
+        }) {
+            bail!(
+                "θ{}: lower {} is above upper {}",
+                i + 1,
+                bounds[i].0,
+                bounds[i].1
+            );
+        }
+        Ok((Box::new(wheelid_solvers::BoxLs::default()), Some(bounds)))
+    }
+}
+
+/// `[identify]`: the estimator and the conditioning.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct IdentifySection {
+    /// `ls` (default), `iv` or `oe`.
+    pub estimator: Option<Estimator>,
+    /// Low-pass cut-off [Hz] (default: chosen from the data).
+    pub cutoff_hz: Option<f64>,
+    /// Butterworth order of one pass.
+    pub order: Option<usize>,
+}
+
+/// `[output]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OutputSection {
+    /// Directory for recording.csv, model.toml, report.txt and report.json (relative to the
+    /// config file).
+    pub dir: PathBuf,
+}
+
+/// The file as read: the three pluggable tables are kept as spanned TOML until their `type`
+/// says who reads them.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RunFile {
+    #[serde(default)]
+    plugins: Vec<PathBuf>,
+    duration_s: Option<f64>,
+    robot: toml::Spanned<toml::Table>,
+    excitation: Option<ExcitationConfig>,
+    #[serde(default = "default_model")]
+    model: toml::Spanned<toml::Table>,
+    #[serde(default = "default_solver")]
+    solver: toml::Spanned<toml::Table>,
+    #[serde(default)]
+    identify: IdentifySection,
+    output: OutputSection,
+}
+
+fn typed(name: &str) -> toml::Spanned<toml::Table> {
+    let mut t = toml::Table::new();
+    t.insert("type".into(), toml::Value::String(name.into()));
+    toml::Spanned::new(0..0, t)
+}
+fn default_model() -> toml::Spanned<toml::Table> {
+    typed("vw-pd")
+}
+fn default_solver() -> toml::Spanned<toml::Table> {
+    typed("ols")
+}
+
+/// What a run produced.
+pub struct RunOutput {
+    /// The recording driven out of the robot.
+    pub recording: Recording,
+    /// The identification.
+    pub identification: Identification,
+    /// The files written.
+    pub files: Vec<PathBuf>,
+}
+
+/// One pluggable table: its `type`, its text, and where it sits in the file.
+struct Table<'a> {
+    section: &'static str,
+    table: &'a toml::Spanned<toml::Table>,
+    file: &'a Path,
+    text: &'a str,
+}
+
+impl Table<'_> {
+    fn kind(&self) -> Result<String> {
+        match self.table.get_ref().get("type") {
+            Some(toml::Value::String(s)) => Ok(s.clone()),
+            Some(_) => Err(self.error("`type` must be a string")),
+            None => Err(self.error("missing `type`")),
+        }
+    }
+    /// 1-based line of the table header, or of `key` inside the table when found.
+    fn line(&self, key: Option<&str>) -> usize {
+        let span = self.table.span();
+        let start = span.start.min(self.text.len());
+        let end = span.end.min(self.text.len()).max(start);
+        let mut at = start;
+        if let Some(k) = key {
+            let body = &self.text[start..end];
+            let mut offset = 0;
+            for line in body.split_inclusive('\n') {
+                let head = line.trim_start();
+                if head.starts_with(k) && head[k.len()..].trim_start().starts_with('=') {
+                    at = start + offset;
+                    break;
+                }
+                offset += line.len();
+            }
+        }
+        self.text[..at].matches('\n').count() + 1
+    }
+    fn error(&self, message: &str) -> anyhow::Error {
+        // serde names an unknown or invalid key in backquotes: point at its line.
+        let key = message.split('`').nth(1).filter(|k| {
+            self.table.get_ref().contains_key(*k) || message.starts_with("unknown field")
+        });
+        anyhow!(
+            "{}: line {}: [{}]: {message}",
+            self.file.display(),
+            self.line(key),
+            self.section
+        )
+    }
+    fn toml_text(&self) -> String {
+        toml::to_string(self.table.get_ref()).unwrap_or_default()
+    }
+    fn built_in<T: ?Sized>(&self) -> Result<Box<T>>
+    where
+        Box<T>: for<'de> Deserialize<'de>,
+    {
+        let value = toml::Value::Table(self.table.get_ref().clone());
+        Box::<T>::deserialize(value).map_err(|e| self.error(e.message()))
+    }
+    fn unknown(&self, kind: &str, built: &[&str], plugins: &[String]) -> anyhow::Error {
+        let known: Vec<&str> = built
+            .iter()
+            .copied()
+            .chain(plugins.iter().map(String::as_str))
+            .collect();
+        self.error(&format!(
+            "unknown {} type `{kind}`; known: {}",
+            self.section,
+            known.join(", ")
+        ))
+    }
+}
+
+/// Runs the job described by the config file at `path`; `progress` shows a bar while the robot
+/// is driven.
+///
+/// # Errors
+/// Config errors (file, line, section), plugin errors, robot errors, identification errors,
+/// output errors. Outputs are written only after the identification succeeded, each file
+/// atomically.
+pub fn run(path: &Path, progress: bool) -> Result<RunOutput> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let file: RunFile = toml::from_str(&text)
+        .map_err(|e| anyhow!("{}: {}", path.display(), toml_msg(&text, &e)))?;
+    let base = path.parent().unwrap_or(Path::new(""));
+    let cx = RunContext { base };
+    // Plugins first: they may provide any of the three.
+    let mut plugins = Plugins::default();
+    let builtin = BuiltIn {
+        robots: &ROBOT_TYPES,
+        models: &MODEL_TYPES,
+        solvers: &SOLVER_TYPES,
+    };
+    for p in &file.plugins {
+        plugins.load(&base.join(p), &builtin)?;
+    }
+    let [plugin_robots, plugin_models, plugin_solvers] = plugins.names();
+    let table = |section, table| Table {
+        section,
+        table,
+        file: path,
+        text: &text,
+    };
+    let model_t = table("model", &file.model);
+    let kind = model_t.kind()?;
+    let model: Box<dyn RegressorModel> = if MODEL_TYPES.contains(&kind.as_str()) {
+        model_t.built_in::<dyn ModelSpec>()?.build()
+    } else if let Some(e) = plugins.model(&kind) {
+        e.make(&model_t.toml_text())
+            .map_err(|m| model_t.error(&m))?
+    } else {
+        return Err(model_t.unknown(&kind, &MODEL_TYPES, &plugin_models));
+    };
+    let solver_t = table("solver", &file.solver);
+    let kind = solver_t.kind()?;
+    let (solver, bounds): (Box<dyn Solver>, _) = if SOLVER_TYPES.contains(&kind.as_str()) {
+        solver_t
+            .built_in::<dyn SolverSpec>()?
+            .build()
+            .map_err(|e| solver_t.error(&e.to_string()))?
+    } else if let Some(e) = plugins.solver(&kind) {
+        (
+            e.make(&solver_t.toml_text())
+                .map_err(|m| solver_t.error(&m))?,
+            None,
+        )
+    } else {
+        return Err(solver_t.unknown(&kind, &SOLVER_TYPES, &plugin_solvers));
+    };
+    if let Some(b) = &bounds
+        && b.len() != model.params().len()
+    {
+        return Err(solver_t.error(&format!(
+            "{} bounds for the {} parameters of model `{}`",
+            b.len(),
+            model.params().len(),
+            model.name()
+        )));
+    }
+    let robot_t = table("robot", &file.robot);
+    let kind = robot_t.kind()?;
+    let mut robot: Box<dyn Robot> = if ROBOT_TYPES.contains(&kind.as_str()) {
+        robot_t
+            .built_in::<dyn RobotSpec>()?
+            .connect(&cx)
+            .map_err(|e| robot_t.error(&format!("{e:#}")))?
+    } else if let Some(e) = plugins.robot(&kind) {
+        e.make(&robot_t.toml_text())
+            .map_err(|m| robot_t.error(&m))?
+    } else {
+        return Err(robot_t.unknown(&kind, &ROBOT_TYPES, &plugin_robots));
+    };
+    let excitation = match &file.excitation {
+        Some(e) => e.build()?,
+        None => ExcitationConfig::ThesisPioneer.build()?,
+    };
+    let duration = file.duration_s.unwrap_or(150.0);
+    if !(duration.is_finite() && duration > 0.0) {
+        bail!("{}: duration_s = {duration} must be > 0", path.display());
+    }
+    let recording = drive(robot.as_mut(), &excitation, duration, progress)
+        .with_context(|| format!("driving the {} robot", robot.name()))?;
+    let mut settings = IdentifySettings {
+        bounds,
+        ..IdentifySettings::default()
+    };
+    settings.estimator = file.identify.estimator.unwrap_or_default();
+    settings.condition = ConditionSettings {
+        cutoff_hz: file.identify.cutoff_hz,
+        order: file
+            .identify
+            .order
+            .unwrap_or(ConditionSettings::default().order),
+        ..ConditionSettings::default()
+    };
+    let identification = identify(
+        std::slice::from_ref(&recording),
+        model.as_ref(),
+        solver.as_ref(),
+        &settings,
+    )?;
+    let dir = base.join(&file.output.dir);
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    let files = vec![
+        dir.join("recording.csv"),
+        dir.join("model.toml"),
+        dir.join("report.txt"),
+        dir.join("report.json"),
+    ];
+    recording.write_csv(&files[0])?;
+    ModelFile::from_identification(&identification).write(&files[1])?;
+    let write = |p: &Path, s: String| {
+        wheelid_core::recording::write_atomic(p, s.as_bytes())
+            .with_context(|| format!("writing {}", p.display()))
+    };
+    write(&files[2], crate::report::to_text(&identification, None))?;
+    write(
+        &files[3],
+        serde_json::to_string_pretty(&crate::report::to_json(&identification, None))?,
+    )?;
+    Ok(RunOutput {
+        recording,
+        identification,
+        files,
+    })
+}
+
+/// Drives `robot` with `excitation` for `duration` seconds (or until a replayed log ends):
+/// read, then send, once per period; row k = (t_k, the command as the robot takes it, v_k,
+/// ω_k, pose_k). Stops the robot at the end, also on error.
+///
+/// # Errors
+/// The robot's errors; fewer than 10 samples.
+pub fn drive(
+    robot: &mut dyn Robot,
+    excitation: &wheelid_robots::Excitation,
+    duration: f64,
+    progress: bool,
+) -> Result<Recording> {
+    let dt = robot.period_s();
+    if !(dt.is_finite() && dt > 0.0) {
+        bail!("the robot's period {dt} s must be > 0");
+    }
+    let n = (duration / dt).round() as usize;
+    let bar = if progress {
+        ProgressBar::new(n as u64)
+    } else {
+        ProgressBar::hidden()
+    };
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} driving [{bar:30}] {pos}/{len} samples")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let mut cols: [Vec<f64>; 8] = std::array::from_fn(|_| Vec::with_capacity(n));
+    let mut t0 = None;
+    let result = (|| -> Result<()> {
+        for _ in 0..n {
+            let o = match robot.read() {
+                Ok(o) => o,
+                Err(RobotError::Ended) => break,
+                Err(e) => return Err(e.into()),
+            };
+            let t0 = *t0.get_or_insert(o.t);
+            let (v_ref, w_ref) = excitation.at(o.t - t0);
+            let (v_ref, w_ref) = robot.send(v_ref, w_ref)?;
+            for (c, x) in cols.iter_mut().zip([
+                o.t,
+                v_ref,
+                w_ref,
+                o.v,
+                o.w,
+                o.pose.x,
+                o.pose.y,
+                o.pose.heading,
+            ]) {
+                c.push(x);
+            }
+            bar.inc(1);
+        }
+        Ok(())
+    })();
+    let stopped = robot.stop();
+    bar.finish_and_clear();
+    result?;
+    stopped?;
+    let [t, v_ref, w_ref, v, w, x, y, phi] = cols;
+    if t.len() < 10 {
+        bail!("the robot gave {} samples; at least 10 are needed", t.len());
+    }
+    let mut rec = Recording::new(format!("{} robot", robot.name()), t, v_ref, w_ref, v, w)?;
+    rec.x = Some(x);
+    rec.y = Some(y);
+    rec.phi = Some(phi);
+    rec.set_meta("robot", robot.name());
+    rec.set_meta("command_hold", "zoh");
+    rec.set_meta(
+        "velocity_sampling",
+        match robot.velocity_sampling() {
+            wheelid_core::VelocitySampling::Instant => "instant",
+            wheelid_core::VelocitySampling::WindowAverage => "window_average",
+        },
+    );
+    Ok(rec)
+}
