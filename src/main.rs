@@ -71,7 +71,7 @@ struct SimulateArgs {
     /// Report the exact v, ω and pose instead of the encoder model.
     #[arg(long)]
     exact: bool,
-    /// Output CSV file.
+    /// Output file: CSV, or a ROS 2 bag (`.mcap`: /cmd_vel Twist, /odom Odometry).
     #[arg(long, short)]
     out: PathBuf,
 }
@@ -182,7 +182,16 @@ fn run_simulate(a: SimulateArgs) -> Result<()> {
             .unwrap_or_else(|| ExcitationConfig::for_robot(&robot)),
     };
     let rec = simulate_recording(&robot, &excitation.build()?, &sim)?;
-    rec.write_csv(&a.out)?;
+    if a.out.extension().is_some_and(|e| e == "mcap") {
+        // A ROS 2 bag: /cmd_vel (geometry_msgs/Twist) and /odom (nav_msgs/Odometry).
+        wheelid::robots::replay::write_mcap(
+            &rec,
+            &a.out,
+            &wheelid::robots::replay::BagTopics::default(),
+        )?;
+    } else {
+        rec.write_csv(&a.out)?;
+    }
     println!(
         "{} samples ({:.1} s of {} at {} s) written to {}",
         rec.len(),
