@@ -198,8 +198,10 @@ impl RobotSpec for KheperaSettings {
                 wheelid_robots::khepera::Pacing::LockStep,
             )
             .context("starting the Khepera loopback server")?;
+            // Lock-step: the server advances one period per read, no wall clock to keep.
             let settings = KheperaSettings {
                 port: server.url(),
+                realtime: false,
                 ..self.clone()
             };
             let robot = Khepera::connect(&settings)?;
@@ -369,17 +371,20 @@ impl Table<'_> {
             None => Err(self.error("missing `type`")),
         }
     }
-    /// 1-based line of the table header, or of `key` inside the table when found.
+    /// 1-based line of the table header, or of `key` inside the table (or its sub-tables)
+    /// when found there.
     fn line(&self, key: Option<&str>) -> usize {
-        let span = self.table.span();
-        let start = span.start.min(self.text.len());
-        let end = span.end.min(self.text.len()).max(start);
+        let start = self.table.span().start.min(self.text.len());
         let mut at = start;
         if let Some(k) = key {
-            let body = &self.text[start..end];
+            let own = format!("[{}.", self.section);
             let mut offset = 0;
-            for line in body.split_inclusive('\n') {
+            for (i, line) in self.text[start..].split_inclusive('\n').enumerate() {
                 let head = line.trim_start();
+                // The next top-level table ends this one.
+                if i > 0 && head.starts_with('[') && !head.starts_with(&own) {
+                    break;
+                }
                 if head.starts_with(k) && head[k.len()..].trim_start().starts_with('=') {
                     at = start + offset;
                     break;
@@ -509,9 +514,16 @@ pub fn run(path: &Path, progress: bool) -> Result<RunOutput> {
         Some(e) => e.build()?,
         None => ExcitationConfig::ThesisPioneer.build()?,
     };
-    let duration = file.duration_s.unwrap_or(150.0);
-    if !(duration.is_finite() && duration > 0.0) {
-        bail!("{}: duration_s = {duration} must be > 0", path.display());
+    // A replayed log runs to its end unless told otherwise; a live robot 150 s.
+    let duration = match (file.duration_s, kind.as_str()) {
+        (Some(d), _) => Some(d),
+        (None, "replay") => None,
+        (None, _) => Some(150.0),
+    };
+    if let Some(d) = duration
+        && !(d.is_finite() && d > 0.0)
+    {
+        bail!("{}: duration_s = {d} must be > 0", path.display());
     }
     let recording = drive(robot.as_mut(), &excitation, duration, progress)
         .with_context(|| format!("driving the {} robot", robot.name()))?;
@@ -560,7 +572,8 @@ pub fn run(path: &Path, progress: bool) -> Result<RunOutput> {
     })
 }
 
-/// Drives `robot` with `excitation` for `duration` seconds (or until a replayed log ends):
+/// Drives `robot` with `excitation` for `duration` seconds (`None`: until it has no more
+/// data, as a replayed log):
 /// read, then send, once per period; row k = (t_k, the command as the robot takes it, v_k,
 /// ω_k, pose_k). Stops the robot at the end, also on error.
 ///
@@ -569,24 +582,24 @@ pub fn run(path: &Path, progress: bool) -> Result<RunOutput> {
 pub fn drive(
     robot: &mut dyn Robot,
     excitation: &wheelid_robots::Excitation,
-    duration: f64,
+    duration: Option<f64>,
     progress: bool,
 ) -> Result<Recording> {
     let dt = robot.period_s();
     if !(dt.is_finite() && dt > 0.0) {
         bail!("the robot's period {dt} s must be > 0");
     }
-    let n = (duration / dt).round() as usize;
-    let bar = if progress {
-        ProgressBar::new(n as u64)
-    } else {
-        ProgressBar::hidden()
+    let n = duration.map_or(usize::MAX, |d| (d / dt).round() as usize);
+    let bar = match (progress, duration) {
+        (false, _) => ProgressBar::hidden(),
+        (true, Some(_)) => ProgressBar::new(n as u64),
+        (true, None) => ProgressBar::no_length(),
     };
     bar.set_style(
         ProgressStyle::with_template("{spinner} driving [{bar:30}] {pos}/{len} samples")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
-    let mut cols: [Vec<f64>; 8] = std::array::from_fn(|_| Vec::with_capacity(n));
+    let mut cols: [Vec<f64>; 8] = std::array::from_fn(|_| Vec::with_capacity(n.min(1 << 20)));
     let mut t0 = None;
     let result = (|| -> Result<()> {
         for _ in 0..n {

@@ -1,0 +1,297 @@
+//! `wheelid run CONFIG` with the configs in `examples/configs/`: every robot backend (the
+//! simulator, replay of a CSV and of an MCAP bag, the Pioneer and Khepera over their protocols
+//! against the loopback servers) and the example plugin, each identified against the true θ of
+//! the robot behind it; then every way a config or a plugin can be wrong, each a clear error.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::Mutex;
+
+use wheelid::run::run;
+
+fn config(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("examples/configs")
+        .join(name)
+}
+
+/// θ1, θ2, θ4, θ6 (the well-excited ones) within `tol` of `truth`.
+fn assert_close(theta: &[f64], truth: &[f64], tol: f64, what: &str) {
+    for i in [0, 1, 3, 5] {
+        let e = (theta[i] - truth[i]) / truth[i];
+        assert!(
+            e.abs() < tol,
+            "{what}: θ{} = {} vs true {} ({:+.2} %)",
+            i + 1,
+            theta[i],
+            truth[i],
+            100.0 * e
+        );
+    }
+}
+
+const PIONEER: [f64; 6] = [0.2604, 0.2509, -0.000499, 0.9965, 0.00263, 1.0768];
+const KHEPERA: [f64; 6] = [0.0228, 0.0568, -0.0001, 1.0030, 0.0732, 0.9981];
+
+#[test]
+fn the_simulator_config_identifies_the_pioneer_and_writes_every_output() {
+    let out = run(&config("run_simulator.toml"), false).expect("runs");
+    assert_eq!(out.recording.len(), 1500);
+    assert_eq!(
+        out.recording.meta("velocity_sampling"),
+        Some("window_average")
+    );
+    assert_close(&out.identification.theta, &PIONEER, 0.005, "simulator");
+    // recording.csv reads back; model.toml is the identification; the reports exist.
+    let rec = wheelid::core::Recording::read_csv(&out.files[0]).expect("csv");
+    assert_eq!(rec.v, out.recording.v);
+    let model = wheelid::files::ModelFile::read(&out.files[1]).expect("model file");
+    assert_eq!(model.theta, out.identification.theta);
+    let report = std::fs::read_to_string(&out.files[2]).expect("report");
+    assert!(report.contains("theta1"), "{report}");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out.files[3]).expect("json")).expect("json");
+    assert_eq!(json["model"], "vw-pd");
+}
+
+#[test]
+fn the_pioneer_over_arcos_against_the_loopback_server_is_identified() {
+    let out = run(&config("run_pioneer_loopback.toml"), false).expect("runs");
+    assert_eq!(out.recording.len(), 1200);
+    // The protocol's resolution (1 mm/s, 1 °/s) costs little.
+    assert_close(&out.identification.theta, &PIONEER, 0.01, "pioneer");
+}
+
+#[test]
+fn the_khepera_over_its_serial_protocol_against_the_loopback_server_is_identified() {
+    let out = run(&config("run_khepera_loopback.toml"), false).expect("runs");
+    assert_eq!(out.recording.len(), 3000);
+    assert_close(&out.identification.theta, &KHEPERA, 0.01, "khepera");
+}
+
+#[test]
+fn a_ros2_bag_made_by_the_simulator_replays_and_identifies() {
+    // The bag the example config names, as its comment says to make it (exact velocities: a
+    // ROS odometry twist is an instantaneous estimate).
+    let bag = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/run/khepera.mcap");
+    std::fs::create_dir_all(bag.parent().expect("dir")).expect("mkdir");
+    let o = Command::new(env!("CARGO_BIN_EXE_wheelid"))
+        .args([
+            "simulate",
+            "--robot",
+            "khepera3",
+            "--excitation",
+            "multisine",
+            "--duration",
+            "120",
+            "--exact",
+            "--out",
+        ])
+        .arg(&bag)
+        .output()
+        .expect("runs");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let out = run(&config("run_replay_mcap.toml"), false).expect("runs");
+    assert_eq!(out.recording.len(), 6001);
+    assert_eq!(out.recording.meta("velocity_sampling"), Some("instant"));
+    assert_close(&out.identification.theta, &KHEPERA, 0.01, "mcap replay");
+}
+
+#[test]
+fn a_csv_replays_the_real_husky() {
+    let csv = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data/real/husky_drive_wetgrass/husky_wetgrass_seg1.csv");
+    if !csv.exists() {
+        eprintln!(
+            "SKIP: {} not found (shared/ sits beside the clone in CI)",
+            csv.display()
+        );
+        return;
+    }
+    let out = run(&config("run_replay_csv.toml"), false).expect("runs");
+    let direct = wheelid::core::Recording::read_csv(&csv).expect("reads");
+    // Every sample comes back with its own command, and the fit is the Husky's (the
+    // identification test reports v about 89 % and ω about 75 % on all four segments).
+    assert_eq!(out.recording.len(), direct.len());
+    assert_eq!(out.recording.v_ref, direct.v_ref);
+    assert_eq!(out.recording.v, direct.v);
+    let fit = |c: usize| out.identification.channels[c].fit_percent;
+    assert!(fit(0) > 80.0 && fit(1) > 60.0, "fit {} {}", fit(0), fit(1));
+}
+
+/// One plugin build at a time: the fault builds overwrite the same library file.
+static BUILD: Mutex<()> = Mutex::new(());
+
+/// Builds the example plugin with `feature` (or none) and copies the library to a fresh file
+/// under `dir` (a library is loaded once per path, and never unloaded).
+fn build_plugin(feature: Option<&str>, dir: &Path) -> PathBuf {
+    let mut cmd = Command::new(env!("CARGO"));
+    cmd.args([
+        "build",
+        "--locked",
+        "-p",
+        "wheelid-turtlebot-plugin",
+        "--message-format=json-render-diagnostics",
+    ])
+    .current_dir(env!("CARGO_MANIFEST_DIR"));
+    if let Some(f) = feature {
+        cmd.args(["--features", f]);
+    }
+    let o = cmd.output().expect("cargo runs");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let built = String::from_utf8_lossy(&o.stdout)
+        .lines()
+        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+        .filter(|v| v["reason"] == "compiler-artifact")
+        .filter(|v| v["target"]["name"] == "wheelid_turtlebot_plugin")
+        .flat_map(|v| {
+            v["filenames"]
+                .as_array()
+                .cloned()
+                .unwrap_or_default()
+                .into_iter()
+                .filter_map(|f| f.as_str().map(PathBuf::from))
+                .collect::<Vec<_>>()
+        })
+        .find(|f| f.extension().is_some_and(|e| e == "so" || e == "dylib"))
+        .expect("the cdylib artifact");
+    let copy = dir.join(format!(
+        "libturtlebot_{}.so",
+        feature.unwrap_or("good").replace('-', "_")
+    ));
+    std::fs::copy(&built, &copy).expect("copy");
+    copy
+}
+
+/// The example plugin config with its `plugins` line pointing at `lib`, written under `dir`.
+fn plugin_config(lib: &Path, dir: &Path) -> PathBuf {
+    let text = std::fs::read_to_string(config("run_plugin.toml")).expect("example config");
+    let text = text
+        .lines()
+        .map(|l| {
+            if l.starts_with("plugins") {
+                format!("plugins = [{:?}]", lib.display().to_string())
+            } else if l.starts_with("dir = ") {
+                "dir = \"out\"".to_owned()
+            } else {
+                l.to_owned()
+            }
+        })
+        .collect::<Vec<_>>()
+        .join("\n");
+    let path = dir.join("run_plugin.toml");
+    std::fs::write(&path, text).expect("write");
+    path
+}
+
+#[test]
+fn the_example_plugin_adds_a_robot_and_a_model_that_identify() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let lib = {
+        let _one = BUILD.lock().unwrap_or_else(|e| e.into_inner());
+        build_plugin(None, dir.path())
+    };
+    let out = run(&plugin_config(&lib, dir.path()), false).expect("runs");
+    let id = &out.identification;
+    assert_eq!(id.model, "vw-pd-coulomb");
+    // The Burger's true θ and dry friction (examples/turtlebot-plugin/src/burger.rs).
+    let truth = [
+        0.150240, 0.150194, -3.45e-6, 1.046490, -5.40e-4, 1.046490, 1.962e-3, 2.453e-2,
+    ];
+    assert_eq!(id.theta.len(), 8);
+    assert_close(&id.theta, &truth, 0.03, "plugin");
+    for i in [6, 7] {
+        let e = (id.theta[i] - truth[i]) / truth[i];
+        assert!(
+            e.abs() < 0.1,
+            "friction {i}: {} vs {}",
+            id.theta[i],
+            truth[i]
+        );
+    }
+}
+
+#[test]
+fn every_plugin_failure_is_a_clear_error() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let err = |lib: &Path| -> String {
+        match run(&plugin_config(lib, dir.path()), false) {
+            Ok(_) => panic!("{} loaded", lib.display()),
+            Err(e) => format!("{e:#}"),
+        }
+    };
+    // No file; a file that is no library.
+    let e = err(&dir.path().join("libabsent.so"));
+    assert!(e.contains("libabsent.so: no such file"), "{e}");
+    let junk = dir.path().join("libjunk.so");
+    std::fs::write(&junk, b"\x7fELF but not really").expect("write");
+    let e = err(&junk);
+    assert!(
+        e.contains("libjunk.so: not a loadable shared library"),
+        "{e}"
+    );
+    let _one = BUILD.lock().unwrap_or_else(|e| e.into_inner());
+    let cases = [
+        ("fault-no-declaration", "not a wheelid plugin"),
+        ("fault-api-version", "incompatible: plugin API version 2"),
+        ("fault-rustc-version", "built by `rustc 0.0.0"),
+        (
+            "fault-panic-in-register",
+            "registration failed: the plugin panicked: fault-panic-in-register",
+        ),
+        (
+            "fault-panic-in-factory",
+            "[robot]: the plugin panicked: fault-panic-in-factory",
+        ),
+    ];
+    for (feature, want) in cases {
+        let lib = build_plugin(Some(feature), dir.path());
+        let e = err(&lib);
+        assert!(e.contains(want), "{feature}: {e}");
+    }
+    // Leave the good build where the example config expects it.
+    build_plugin(None, dir.path());
+}
+
+/// Writes `text` as a config in a fresh directory and runs it.
+fn run_text(text: &str) -> String {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("bad.toml");
+    std::fs::write(&path, text).expect("write");
+    match run(&path, false) {
+        Ok(_) => panic!("ran:\n{text}"),
+        Err(e) => format!("{e:#}"),
+    }
+}
+
+#[test]
+fn unknown_types_list_the_known_ones_and_misspelt_keys_name_their_line() {
+    let e = run_text("[robot]\ntype = \"roomba\"\n[output]\ndir = \"o\"\n");
+    assert!(
+        e.contains("line 1: [robot]: unknown robot type `roomba`; known: simulator, replay, pioneer, khepera"),
+        "{e}"
+    );
+    let e = run_text(
+        "[robot]\ntype = \"simulator\"\n[model]\ntype = \"vw-pdd\"\n[output]\ndir = \"o\"\n",
+    );
+    assert!(
+        e.contains("line 3: [model]: unknown model type `vw-pdd`; known: vw-pd, wheel-pd"),
+        "{e}"
+    );
+    let e = run_text(
+        "[robot]\ntype = \"simulator\"\nrobot = \"pioneer3dx\"\nsed = 3\n[output]\ndir = \"o\"\n",
+    );
+    assert!(e.contains("line 4: [robot]: unknown field `sed`"), "{e}");
+    let e = run_text(
+        "[robot]\ntype = \"simulator\"\n[solver]\ntype = \"box\"\ntheta_lower = [0.0]\ntheta_uper = [1.0]\n[output]\ndir = \"o\"\n",
+    );
+    assert!(
+        e.contains("line 6: [solver]: unknown field `theta_uper`"),
+        "{e}"
+    );
+    let e = run_text("[robot]\nrobot = \"pioneer3dx\"\n[output]\ndir = \"o\"\n");
+    assert!(e.contains("line 1: [robot]: missing `type`"), "{e}");
+    // A misspelt top-level key: the TOML reader's own line and column.
+    let e = run_text("duration = 3\n[robot]\ntype = \"simulator\"\n[output]\ndir = \"o\"\n");
+    assert!(e.contains("line 1, column 1"), "{e}");
+}
