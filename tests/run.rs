@@ -124,18 +124,22 @@ static BUILD: Mutex<()> = Mutex::new(());
 
 /// Builds the example plugin with `feature` (or none) and copies the library to a fresh file
 /// under `dir` (a library is loaded once per path, and never unloaded).
+///
+/// The build is `cargo test --workspace --no-run`, the same resolution as the workspace's test
+/// run that is running this test: without a feature it is already built (nothing recompiles),
+/// with one only the plugin crate does.
 fn build_plugin(feature: Option<&str>, dir: &Path) -> PathBuf {
     let mut cmd = Command::new(env!("CARGO"));
     cmd.args([
-        "build",
+        "test",
+        "--workspace",
+        "--no-run",
         "--locked",
-        "-p",
-        "wheelid-turtlebot-plugin",
         "--message-format=json-render-diagnostics",
     ])
     .current_dir(env!("CARGO_MANIFEST_DIR"));
     if let Some(f) = feature {
-        cmd.args(["--features", f]);
+        cmd.args(["--features", &format!("wheelid-turtlebot-plugin/{f}")]);
     }
     let o = cmd.output().expect("cargo runs");
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
@@ -144,6 +148,7 @@ fn build_plugin(feature: Option<&str>, dir: &Path) -> PathBuf {
         .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
         .filter(|v| v["reason"] == "compiler-artifact")
         .filter(|v| v["target"]["name"] == "wheelid_turtlebot_plugin")
+        .filter(|v| v["profile"]["test"] == false)
         .flat_map(|v| {
             v["filenames"]
                 .as_array()
