@@ -179,9 +179,15 @@ pub fn simulate(theta: &[f64], rec: &Recording, initial: &[f64]) -> Result<[Vec<
     let mut v_out = Vec::with_capacity(n);
     let mut w_out = Vec::with_capacity(n);
     let h_max = substep(&th);
+    let [t1, t2, t3, t4, t5, t6] = th;
+    let (i1, i2) = (1.0 / t1, 1.0 / t2);
+    // eq. 2.19 as `accel`, multiplying by 1/θ1, 1/θ2 (the step's critical path).
     let f = |x: &[f64; 2], u: (f64, f64)| {
-        let (dv, dw) = accel(&th, x[0], x[1], u.0, u.1);
-        [dv, dw]
+        let [v, w] = *x;
+        [
+            (t3 * w * w - t4 * v + u.0) * i1,
+            (-t5 * v * w - t6 * w + u.1) * i2,
+        ]
     };
     let mut x = [v0, w0];
     v_out.push(v0);
@@ -205,13 +211,17 @@ const NZ: usize = 2 + 2 * NS;
 
 /// Derivative of the augmented state z = (v, ω, S) for commands u.
 #[inline]
-fn augmented_rhs(theta: &[f64; 6], z: &[f64; NZ], u: (f64, f64)) -> [f64; NZ] {
-    let [t1, t2, t3, t4, t5, t6] = *theta;
+fn augmented_rhs(theta: &[f64; 6], inv: [f64; 2], z: &[f64; NZ], u: (f64, f64)) -> [f64; NZ] {
+    let [_, _, t3, t4, t5, t6] = *theta;
+    let [i1, i2] = inv;
     let (v, w) = (z[0], z[1]);
-    let (dv, dw) = accel(theta, v, w, u.0, u.1);
+    let (dv, dw) = (
+        (t3 * w * w - t4 * v + u.0) * i1,
+        (-t5 * v * w - t6 * w + u.1) * i2,
+    );
     let a = [
-        [-t4 / t1, 2.0 * t3 * w / t1],
-        [-t5 * w / t2, -(t5 * v + t6) / t2],
+        [-t4 * i1, 2.0 * t3 * w * i1],
+        [-t5 * w * i2, -(t5 * v + t6) * i2],
     ];
     let mut out = [0.0; NZ];
     out[0] = dv;
@@ -221,12 +231,12 @@ fn augmented_rhs(theta: &[f64; 6], z: &[f64; NZ], u: (f64, f64)) -> [f64; NZ] {
         out[2 + j] = a[0][0] * sv + a[0][1] * sw;
         out[2 + NS + j] = a[1][0] * sv + a[1][1] * sw;
     }
-    out[2] += -dv / t1;
-    out[2 + 2] += w * w / t1;
-    out[2 + 3] += -v / t1;
-    out[2 + NS + 1] += -dw / t2;
-    out[2 + NS + 4] += -v * w / t2;
-    out[2 + NS + 5] += -w / t2;
+    out[2] += -dv * i1;
+    out[2 + 2] += w * w * i1;
+    out[2 + 3] += -v * i1;
+    out[2 + NS + 1] += -dw * i2;
+    out[2 + NS + 4] += -v * w * i2;
+    out[2 + NS + 5] += -w * i2;
     out
 }
 
@@ -270,7 +280,8 @@ pub fn simulate_with_sensitivities(
         }
     };
     store(0, &z, 1.0, &mut y, &mut sens);
-    let f = |z: &[f64; NZ], u: (f64, f64)| augmented_rhs(&th, z, u);
+    let inv = [1.0 / th[0], 1.0 / th[1]];
+    let f = |z: &[f64; NZ], u: (f64, f64)| augmented_rhs(&th, inv, z, u);
     for k in 1..n {
         let mut q = [0.0; NZ];
         let span = for_each_substep(rec, k, hold, h_max, |u0, u1, h| {

@@ -350,10 +350,6 @@ impl DynamicModel for Extended {
         let th_after = ph
             .payload
             .map(|(_, a)| [a[0], a[1], a[2], th0[3], a[3], th0[5]]);
-        let theta_at = |t: f64| match (ph.payload, th_after) {
-            (Some((ts, _)), Some(a)) if t >= ts => a,
-            _ => th0,
-        };
         let zoh = rec.command_hold() == CommandHold::Zoh;
         let avg = rec.velocity_sampling() == VelocitySampling::WindowAverage;
         let t0 = rec.t[0];
@@ -376,14 +372,18 @@ impl DynamicModel for Extended {
         };
         // Dry friction only when present: tanh dominates the cost of a step.
         let dry = ph.coulomb != [0.0, 0.0];
-        let rhs = |th: &[f64; 6], v: f64, w: f64, u: [f64; 2]| {
+        // θ with the reciprocals of θ1, θ2 and its integration sub-step, before and after a
+        // payload change: a step multiplies instead of dividing.
+        let prepare = |th: [f64; 6]| (th, [1.0 / th[0], 1.0 / th[1]], dynamics::substep(&th));
+        let (before, after) = (prepare(th0), th_after.map(prepare));
+        let rhs = |th: &[f64; 6], inv: &[f64; 2], v: f64, w: f64, u: [f64; 2]| {
             let mut fv = u[0] + th[2] * w * w - th[3] * v - th[3] * ph.slip[0] * v * w.abs();
             let mut fw = u[1] - th[4] * v * w - th[5] * w - th[5] * ph.slip[1] * v.abs() * w;
             if dry {
                 fv -= ph.coulomb[0] * (v / FRICTION_EPS[0]).tanh();
                 fw -= ph.coulomb[1] * (w / FRICTION_EPS[1]).tanh();
             }
-            [fv / th[0], fw / th[1]]
+            [fv * inv[0], fw * inv[1]]
         };
         // The rate-limited setpoint starts where it holds the initial state (a robot at rest
         // holds zero), as the simulator's.
@@ -402,11 +402,13 @@ impl DynamicModel for Extended {
         for i in 1..m {
             let (ta, tb) = (grid[i - 1], grid[i]);
             let span = tb - ta;
-            let th = theta_at(0.5 * (ta + tb));
+            let (th, inv, h_max) = match (ph.payload, after) {
+                (Some((ts, _)), Some(a)) if 0.5 * (ta + tb) >= ts => a,
+                _ => before,
+            };
             let ca = cursor.at(if zoh { 0.5 * (ta + tb) } else { ta } - ph.delay);
             let cb = if zoh { ca } else { cursor.at(tb - ph.delay) };
-            let rhs_at = |x: &[f64; 2], u: (f64, f64)| rhs(&th, x[0], x[1], [u.0, u.1]);
-            let h_max = dynamics::substep(&th);
+            let rhs_at = |x: &[f64; 2], u: (f64, f64)| rhs(&th, &inv, x[0], x[1], [u.0, u.1]);
             let steps = (span / h_max).ceil().max(1.0) as usize;
             let h = span / steps as f64;
             let mut q = [0.0; 2];

@@ -47,7 +47,9 @@ use std::time::Instant;
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, TerminationReason};
 use nalgebra::{DMatrix, DVector};
 use nalgebra034 as na;
-use wheelid_core::{BoundState, DynamicModel, LinearProblem, Recording, SolveError, SolveStatus};
+use wheelid_core::{
+    BoundState, DynamicModel, LinearProblem, Recording, Simulation, SolveError, SolveStatus,
+};
 
 use crate::ols;
 
@@ -204,6 +206,9 @@ struct Problem<'a, M: ?Sized> {
     rows: usize,
     /// The last weighted Jacobian in (θ, x0) and the u it was taken at.
     last_jacobian: RefCell<Option<(na::DVector<f64>, DMatrix<f64>)>>,
+    /// The simulations of the last residual evaluation and the u they were run at: the base of
+    /// the next forward-difference Jacobian, which Levenberg–Marquardt asks for at that u.
+    last_simulation: RefCell<Option<(na::DVector<f64>, Vec<Simulation>)>>,
 }
 
 /// One central-difference column: parameter index, step, outputs at +step and −step.
@@ -245,6 +250,7 @@ impl<M: DynamicModel + ?Sized> Problem<'_, M> {
     /// or diverged.
     fn raw_residuals(&self, theta: &[f64], u: &na::DVector<f64>) -> Option<Vec<Vec<Vec<f64>>>> {
         let mut out = Vec::with_capacity(self.recs.len());
+        let mut sims = Vec::with_capacity(self.recs.len());
         for (r, rec) in self.recs.iter().enumerate() {
             let sim = self
                 .model
@@ -259,6 +265,10 @@ impl<M: DynamicModel + ?Sized> Problem<'_, M> {
                 per.push(meas[c].iter().zip(y).map(|(m, s)| m - s).collect());
             }
             out.push(per);
+            sims.push(sim);
+        }
+        if self.forward {
+            self.last_simulation.replace(Some((u.clone(), sims)));
         }
         Some(out)
     }
@@ -268,6 +278,7 @@ impl<M: DynamicModel + ?Sized> Problem<'_, M> {
         theta: &[f64],
         x0: &[f64],
         rec: &Recording,
+        cached: Option<Simulation>,
     ) -> Option<Vec<DMatrix<f64>>> {
         let (p, s, n) = (self.p(), self.nch(), rec.len());
         if let Ok(Some((_, sens))) = self.model.simulate_with_sensitivities(theta, rec, x0) {
@@ -285,10 +296,10 @@ impl<M: DynamicModel + ?Sized> Problem<'_, M> {
         // Central differences, step ~ 1e-5 relative (above the integrator's sub-step jitter),
         // the columns shared out over the available cores.
         let scale = theta.iter().fold(0.0f64, |a, x| a.max(x.abs())).max(1e-12);
-        let base_sim = if self.forward {
-            Some(self.model.simulate(theta, rec, x0).ok()?)
-        } else {
-            None
+        let base_sim = match (self.forward, cached) {
+            (true, Some(sim)) => Some(sim),
+            (true, None) => Some(self.model.simulate(theta, rec, x0).ok()?),
+            (false, _) => None,
         };
         let column = |j: usize| -> Option<FdColumn> {
             let mut th = theta.to_vec();
@@ -353,8 +364,12 @@ impl<M: DynamicModel + ?Sized> Problem<'_, M> {
             .map_or(s * self.recs.len(), |_| 0);
         let theta = self.theta_of(u);
         let mut jac = DMatrix::zeros(self.rows, cols);
+        let mut cached = match self.last_simulation.take() {
+            Some((at, sims)) if at == *u => sims.into_iter().map(Some).collect(),
+            _ => vec![None; self.recs.len()],
+        };
         for (r, rec) in self.recs.iter().enumerate() {
-            let sens = self.sensitivities(&theta, &self.initial_of(u, r), rec)?;
+            let sens = self.sensitivities(&theta, &self.initial_of(u, r), rec, cached[r].take())?;
             for (c, (sc, &w)) in sens.iter().zip(&self.weight).enumerate() {
                 for k in (0..rec.len()).filter(|&k| self.mask[r][k]) {
                     let row = self.offsets[r] + k * s + c;
@@ -534,6 +549,7 @@ impl OutputError {
             forward: self.forward_differences,
             rows,
             last_jacobian: RefCell::new(None),
+            last_simulation: RefCell::new(None),
         };
         let lm = LevenbergMarquardt::new()
             .with_ftol(self.tolerance)
