@@ -46,19 +46,32 @@ pub fn accel(theta: &[f64; 6], v: f64, w: f64, v_ref: f64, w_ref: f64) -> (f64, 
     )
 }
 
+/// A command that varies linearly over an integration step: what [`rk4_step`] needs of it.
+pub(crate) trait StepCommand: Copy {
+    /// The command halfway between `self` and `other`.
+    fn midpoint(&self, other: &Self) -> Self;
+}
+
+impl StepCommand for (f64, f64) {
+    #[inline(always)]
+    fn midpoint(&self, other: &Self) -> Self {
+        ((self.0 + other.0) * 0.5, (self.1 + other.1) * 0.5)
+    }
+}
+
 /// One classical RK4 step of ẋ = f(x, u) of length `h`, with the command varying linearly from
 /// `u0` to `u1` over the step (its midpoint for the middle stages); adds ∫x over the step, by the
 /// same stages, to `q` — window averages to the same order as the state.
 #[inline(always)]
-pub(crate) fn rk4_step<const N: usize>(
-    f: impl Fn(&[f64; N], (f64, f64)) -> [f64; N],
+pub(crate) fn rk4_step<const N: usize, U: StepCommand>(
+    f: impl Fn(&[f64; N], U) -> [f64; N],
     x: &mut [f64; N],
     q: &mut [f64; N],
-    u0: (f64, f64),
-    u1: (f64, f64),
+    u0: U,
+    u1: U,
     h: f64,
 ) {
-    let um = ((u0.0 + u1.0) * 0.5, (u0.1 + u1.1) * 0.5);
+    let um = u0.midpoint(&u1);
     let k1 = f(x, u0);
     let x2: [f64; N] = std::array::from_fn(|i| x[i] + 0.5 * h * k1[i]);
     let k2 = f(&x2, um);

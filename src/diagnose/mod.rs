@@ -51,7 +51,7 @@ use wheelid_core::condition::{self, ConditionSettings};
 use wheelid_core::residual::holm;
 use wheelid_core::{
     ChannelInfo, DynamicModel, ParamInfo, Recording, RegressorModel, Result as CoreResult,
-    Simulation, metrics,
+    Sensitivities, Simulation, metrics,
 };
 use wheelid_models::{Candidate, Extended};
 use wheelid_solvers::{Ols, OutputError, OutputErrorFit};
@@ -340,6 +340,16 @@ impl DynamicModel for Pinned<'_> {
     }
     fn simulate(&self, theta: &[f64], rec: &Recording, initial: &[f64]) -> CoreResult<Simulation> {
         self.inner.simulate(&self.expand(theta), rec, initial)
+    }
+    fn simulate_with_sensitivities(
+        &self,
+        theta: &[f64],
+        rec: &Recording,
+        initial: &[f64],
+    ) -> CoreResult<Option<(Simulation, Sensitivities)>> {
+        self.inner
+            .sensitivities_of(&self.expand(theta), rec, initial, &self.free)
+            .map(Some)
     }
 }
 

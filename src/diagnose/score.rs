@@ -108,9 +108,9 @@ pub(crate) fn difference(a: &Outputs, b: &Outputs, h: f64) -> Outputs {
         .collect()
 }
 
-/// Forward-difference Jacobian of the weighted training outputs with respect to θ and each
-/// recording's initial state (columns: θ, then (v0, ω0) per recording); `None` if a perturbed
-/// simulation fails.
+/// Jacobian of the weighted training outputs with respect to θ and each recording's initial
+/// state (columns: θ, then (v0, ω0) per recording): the model's sensitivities, or forward
+/// differences of its simulation if it has none; `None` if a simulation fails.
 pub(crate) fn jacobian(
     model: &dyn DynamicModel,
     theta: &[f64],
@@ -121,6 +121,42 @@ pub(crate) fn jacobian(
     let p = theta.len();
     let nrec = frame.recs.len();
     let mut cols: Vec<DVector<f64>> = Vec::with_capacity(p + 2 * nrec);
+    // The model's own sensitivities where it has them.
+    let mut sens = Vec::with_capacity(nrec);
+    for (rec, x0) in frame.recs.iter().zip(initial) {
+        match model.simulate_with_sensitivities(theta, rec, x0) {
+            Ok(Some((_, s))) => sens.push(s),
+            Ok(None) => break,
+            Err(_) => return None,
+        }
+    }
+    if sens.len() == nrec {
+        let zeros = || -> Outputs {
+            frame
+                .recs
+                .iter()
+                .map(|rec| [vec![0.0; rec.len()], vec![0.0; rec.len()]])
+                .collect()
+        };
+        for j in 0..p {
+            let d: Outputs = sens
+                .iter()
+                .map(|s| [0, 1].map(|c| s.theta[c].column(j).iter().copied().collect()))
+                .collect();
+            cols.push(frame.flatten(&d));
+        }
+        for (r, s) in sens.iter().enumerate() {
+            for i in 0..2 {
+                let mut d = zeros();
+                for c in 0..2 {
+                    d[r][c] = s.initial[c].column(i).iter().copied().collect();
+                }
+                cols.push(frame.flatten(&d));
+            }
+        }
+        let j = DMatrix::from_columns(&cols);
+        return j.iter().all(|x| x.is_finite()).then_some(j);
+    }
     for j in 0..p {
         let h = 1e-6 * theta[j].abs().max(1e-3);
         let mut th = theta.to_vec();
