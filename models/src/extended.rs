@@ -341,7 +341,7 @@ impl DynamicModel for Extended {
     }
     fn simulate(&self, theta: &[f64], rec: &Recording, initial: &[f64]) -> Result<Simulation> {
         let (th0, ph) = self.physics(theta)?;
-        let y = self.integrate::<2, 0>(&th0, &ph, rec, initial)?;
+        let y = self.integrate::<2, 0>(&th0, &ph, rec, initial, [])?;
         Ok(y.to_vec())
     }
 
@@ -358,37 +358,46 @@ impl DynamicModel for Extended {
 
 /// Sensitivity columns integrated analytically: θ1…θ6, v0, ω0.
 const NS: usize = 8;
-/// The augmented state of the sensitivity pass: v, ω, ∂v/∂(θ, x0), ∂ω/∂(θ, x0).
-const NZ: usize = 2 + 2 * NS;
+/// Columns per sensitivity pass: the eight are integrated in two passes of four, on two
+/// threads (each a state of 2 + 2·4).
+const HALF: usize = NS / 2;
+/// The augmented state of a sensitivity pass: v, ω, ∂v/∂p, ∂ω/∂p for its four columns.
+const NZ: usize = 2 + 2 * HALF;
 
 /// A command (v, ω setpoints after the pipeline) and its sensitivities to (θ1…θ6, v0, ω0):
-/// `M` = 0 in a plain simulation, [`NS`] in the sensitivity pass.
+/// `M` = 0 in a plain simulation, [`HALF`] in a sensitivity pass.
+/// `live` is false while `du` is zero (almost always: the command depends on (θ, x0) only before
+/// the first delayed command and while a rate limit slews from the holding command), so that
+/// the pass skips it.
 #[derive(Clone, Copy)]
 struct Cmd<const M: usize> {
     u: [f64; 2],
     du: [[f64; M]; 2],
+    live: bool,
 }
 
 impl<const M: usize> Cmd<M> {
-    fn at(u: [f64; 2], du: [[f64; M]; 2]) -> Self {
-        Self { u, du }
+    fn at(u: [f64; 2], du: [[f64; M]; 2], live: bool) -> Self {
+        Self { u, du, live }
     }
     /// `self` + f (`other` − `self`).
     fn lerp(&self, other: &Self, f: f64) -> Self {
-        Self {
-            u: [0, 1].map(|k| self.u[k] + f * (other.u[k] - self.u[k])),
-            du: [0, 1].map(|k| std::array::from_fn(|j| self.du[k][j] + f * (other.du[k][j] - self.du[k][j]))),
+        let mut out = *self;
+        out.u = [0, 1].map(|k| self.u[k] + f * (other.u[k] - self.u[k]));
+        if self.live || other.live {
+            out.du = [0, 1].map(|k| {
+                std::array::from_fn(|j| self.du[k][j] + f * (other.du[k][j] - self.du[k][j]))
+            });
+            out.live = true;
         }
+        out
     }
 }
 
 impl<const M: usize> StepCommand for Cmd<M> {
     #[inline(always)]
     fn midpoint(&self, other: &Self) -> Self {
-        Self {
-            u: [0, 1].map(|k| (self.u[k] + other.u[k]) * 0.5),
-            du: [0, 1].map(|k| std::array::from_fn(|j| (self.du[k][j] + other.du[k][j]) * 0.5)),
-        }
+        self.lerp(other, 0.5)
     }
 }
 
@@ -438,11 +447,19 @@ impl Extended {
                         let mut th = theta.to_vec();
                         th[j] += step(j);
                         let (t, p) = self.physics(&th)?;
-                        self.integrate::<2, 0>(&t, &p, rec, initial)
+                        self.integrate::<2, 0>(&t, &p, rec, initial, [])
                     })
                 })
                 .collect();
-            let z = self.integrate::<NZ, NS>(&th0, &ph, rec, initial);
+            let second =
+                scope.spawn(|| self.integrate::<NZ, HALF>(&th0, &ph, rec, initial, [4, 5, 6, 7]));
+            let first = self.integrate::<NZ, HALF>(&th0, &ph, rec, initial, [0, 1, 2, 3]);
+            let z = first.and_then(|a| {
+                let b = second.join().unwrap_or_else(|_| {
+                    Err(Error::InvalidSetting("a simulation panicked".into()))
+                })?;
+                Ok((a, b))
+            });
             let fd: Vec<Result<[Vec<f64>; 2]>> = handles
                 .into_iter()
                 .map(|h| {
@@ -453,7 +470,13 @@ impl Extended {
                 .collect();
             (z, fd)
         });
-        let z = z?;
+        let (za, zb) = z?;
+        // Column j of (θ1…θ6, v0, ω0), channel c.
+        let col = |c: usize, j: usize| {
+            let (z, a) = if j < HALF { (&za, j) } else { (&zb, j - HALF) };
+            &z[2 + c * HALF + a]
+        };
+        let z = &za;
         let n = rec.len();
         let mut fd = fd.into_iter();
         let mut sens_theta = [
@@ -463,7 +486,7 @@ impl Extended {
         for (a, &j) in columns.iter().enumerate() {
             if j < 6 {
                 for c in 0..2 {
-                    for (k, x) in z[2 + c * NS + j].iter().enumerate() {
+                    for (k, x) in col(c, j).iter().enumerate() {
                         sens_theta[c][(k, a)] = *x;
                     }
                 }
@@ -479,13 +502,11 @@ impl Extended {
                 }
             }
         }
-        let sens_initial = [0, 1].map(|c| {
-            nalgebra::DMatrix::from_fn(n, 2, |k, i| z[2 + c * NS + 6 + i][k])
-        });
+        let sens_initial =
+            [0, 1].map(|c| nalgebra::DMatrix::from_fn(n, 2, |k, i| col(c, 6 + i)[k]));
         let [tv, tw] = sens_theta;
         let [iv, iw] = sens_initial;
-        let mut z = z.into_iter();
-        let y: Simulation = z.by_ref().take(2).collect();
+        let y: Simulation = za.into_iter().take(2).collect();
         Ok((
             y,
             Sensitivities {
@@ -496,16 +517,19 @@ impl Extended {
     }
 
     /// The simulation of the module doc on the recording's samples: with `N` = 2, `M` = 0 the
-    /// outputs (v̂, ω̂); with `N` = [`NZ`], `M` = [`NS`] also their sensitivities to (θ, x0)
-    /// (channels 2.. as in [`NZ`]).
+    /// outputs (v̂, ω̂); with `N` = [`NZ`], `M` = [`HALF`] also their sensitivities to the
+    /// parameters `cols` of (θ1…θ6, v0, ω0) (channels 2 + c·M + a: ∂ŷ_c/∂p_cols[a]).
     fn integrate<const N: usize, const M: usize>(
         &self,
         th0: &[f64; 6],
         ph: &Physics,
         rec: &Recording,
         initial: &[f64],
+        cols: [usize; M],
     ) -> Result<[Vec<f64>; N]> {
         let sens = M > 0;
+        // Where each parameter's column sits in this pass (None: not in it).
+        let slot = |j: usize| cols.iter().position(|&c| c == j);
         let &[v0, w0] = initial else {
             return Err(Error::InvalidSetting(format!(
                 "initial state must be [v, ω], got {} values",
@@ -535,16 +559,21 @@ impl Extended {
                 (6, t4, t5 * w0),
                 (7, -2.0 * t3 * w0, t5 * v0 + t6),
             ] {
-                dhold[0][j] = dv;
-                dhold[1][j] = dw;
+                if let Some(a) = slot(j) {
+                    dhold[0][a] = dv;
+                    dhold[1][a] = dw;
+                }
             }
         }
         let mut cursor = CommandCursor::new(rec, hold);
         // The recorded command at τ (the holding one before the record).
         let mut command = |tau: f64| {
             let c = cursor.at(tau);
-            let dc = if tau < t0 { dhold } else { [[0.0; M]; 2] };
-            Cmd::at([c.0, c.1], dc)
+            if sens && tau < t0 {
+                Cmd::at([c.0, c.1], dhold, true)
+            } else {
+                Cmd::at([c.0, c.1], [[0.0; M]; 2], false)
+            }
         };
         // Setpoint pipeline after the delay: saturation → rate limit (state) → asymmetry → drift.
         let target = |c: Cmd<M>| match ph.sat {
@@ -573,20 +602,28 @@ impl Extended {
             [uv * g, uw * g]
         };
         let shaped = |c: &Cmd<M>, t: f64| {
-            let mut du = [[0.0; M]; 2];
-            for j in 0..M {
-                let col = shape([c.du[0][j], c.du[1][j]], t);
-                du[0][j] = col[0];
-                du[1][j] = col[1];
+            let mut out = *c;
+            out.u = shape(c.u, t);
+            if c.live {
+                for j in 0..M {
+                    let col = shape([c.du[0][j], c.du[1][j]], t);
+                    out.du[0][j] = col[0];
+                    out.du[1][j] = col[1];
+                }
             }
-            Cmd::at(shape(c.u, t), du)
+            out
         };
         // Dry friction only when present: tanh dominates the cost of a step.
         let dry = ph.coulomb != [0.0, 0.0];
         // θ with the reciprocals of θ1, θ2 and its integration sub-step, before and after a
         // payload change: a step multiplies instead of dividing.
         let prepare = |th: [f64; 6], after: bool| {
-            (th, [1.0 / th[0], 1.0 / th[1]], dynamics::substep(&th), after)
+            (
+                th,
+                [1.0 / th[0], 1.0 / th[1]],
+                dynamics::substep(&th),
+                after,
+            )
         };
         let (before, after) = (prepare(*th0, false), th_after.map(|a| prepare(a, true)));
         let [kv, kw] = ph.slip;
@@ -612,26 +649,32 @@ impl Extended {
                 let a01 = (2.0 * th[2] * w - th[3] * kv * v * sign(w)) * inv[0];
                 let a10 = (-th[4] * w - th[5] * kw * sign(v) * w) * inv[1];
                 let a11 = (-th[4] * v - th[5] * (1.0 + kw * v.abs()) - dry_w) * inv[1];
-                for j in 0..NS {
-                    let (sv, sw) = (z[2 + j], z[2 + NS + j]);
-                    out[2 + j] = a00 * sv + a01 * sw + c.du[0][j] * inv[0];
-                    out[2 + NS + j] = a10 * sv + a11 * sw + c.du[1][j] * inv[1];
+                for a in 0..M {
+                    let (sv, sw) = (z[2 + a], z[2 + M + a]);
+                    out[2 + a] = a00 * sv + a01 * sw;
+                    out[2 + M + a] = a10 * sv + a11 * sw;
+                    if c.live {
+                        out[2 + a] += c.du[0][a] * inv[0];
+                        out[2 + M + a] += c.du[1][a] * inv[1];
+                    }
+                    // ∂f/∂θ (θ1, θ2, θ3, θ5 no longer in force after a payload change).
+                    match cols[a] {
+                        0 if !changed => out[2 + a] -= out[0] * inv[0],
+                        1 if !changed => out[2 + M + a] -= out[1] * inv[1],
+                        2 if !changed => out[2 + a] += w * w * inv[0],
+                        3 => out[2 + a] -= v * (1.0 + kv * w.abs()) * inv[0],
+                        4 if !changed => out[2 + M + a] -= v * w * inv[1],
+                        5 => out[2 + M + a] -= w * (1.0 + kw * v.abs()) * inv[1],
+                        _ => {}
+                    }
                 }
-                if !changed {
-                    out[2] -= out[0] * inv[0];
-                    out[2 + 2] += w * w * inv[0];
-                    out[2 + NS + 1] -= out[1] * inv[1];
-                    out[2 + NS + 4] -= v * w * inv[1];
-                }
-                out[2 + 3] -= v * (1.0 + kv * w.abs()) * inv[0];
-                out[2 + NS + 5] -= w * (1.0 + kw * v.abs()) * inv[1];
             }
             out
         };
         // The rate-limited setpoint starts where it holds the initial state (a robot at rest
         // holds zero), as the simulator's.
         let mut setpoint = if ph.accel.is_some() {
-            Cmd::at([hold.0, hold.1], dhold)
+            Cmd::at([hold.0, hold.1], dhold, sens)
         } else {
             target(command(t0 - ph.delay))
         };
@@ -640,9 +683,11 @@ impl Extended {
         let mut z = [0.0; N];
         z[0] = v0;
         z[1] = w0;
-        if sens {
-            z[2 + 6] = 1.0;
-            z[2 + NS + 7] = 1.0;
+        if let Some(a) = slot(6) {
+            z[2 + a] = 1.0;
+        }
+        if let Some(a) = slot(7) {
+            z[2 + M + a] = 1.0;
         }
         let mut y: [Vec<f64>; N] = std::array::from_fn(|c| {
             let mut v = Vec::with_capacity(m);
@@ -684,6 +729,7 @@ impl Extended {
                             // Slewing, the setpoint keeps its own sensitivity.
                             if (tgt.u[k] - s0.u[k]).abs() > step {
                                 s1.du[k] = s0.du[k];
+                                s1.live |= s0.live;
                             }
                         }
                         s1
@@ -806,7 +852,10 @@ mod tests {
             (vec![Candidate::AccelerationLimit], vec![0.8, 2.0]),
             (vec![Candidate::CoulombFriction], vec![0.02, 0.05]),
             (vec![Candidate::WheelAsymmetry], vec![1.1]),
-            (vec![Candidate::PayloadChange], vec![3.3, 0.3, 0.3, -0.04, 0.1]),
+            (
+                vec![Candidate::PayloadChange],
+                vec![3.3, 0.3, 0.3, -0.04, 0.1],
+            ),
             (vec![Candidate::GainDrift], vec![0.01]),
             (vec![Candidate::Slip], vec![0.05, 0.1]),
             (
@@ -835,12 +884,20 @@ mod tests {
                     .expect("has sensitivities");
                 let plain = e.simulate(&th, &rec, &x0).expect("simulates");
                 for c in 0..2 {
-                    assert_eq!(y[c], plain[c], "{cands:?}: the pass's outputs are the simulation's");
+                    assert_eq!(
+                        y[c], plain[c],
+                        "{cands:?}: the pass's outputs are the simulation's"
+                    );
                 }
                 let central = |j: usize| -> Vec<Vec<f64>> {
                     let (mut up, mut dn) = (th.clone(), th.clone());
                     let (mut xu, mut xd) = (x0.to_vec(), x0.to_vec());
-                    let h = 1e-6 * if j < th.len() { th[j].abs().max(1e-2) } else { 1.0 };
+                    let h = 1e-6
+                        * if j < th.len() {
+                            th[j].abs().max(1e-2)
+                        } else {
+                            1.0
+                        };
                     if j < th.len() {
                         up[j] += h;
                         dn[j] -= h;
@@ -851,7 +908,12 @@ mod tests {
                     let a = e.simulate(&up, &rec, &xu).expect("simulates");
                     let b = e.simulate(&dn, &rec, &xd).expect("simulates");
                     (0..2)
-                        .map(|c| a[c].iter().zip(&b[c]).map(|(p, q)| (p - q) / (2.0 * h)).collect())
+                        .map(|c| {
+                            a[c].iter()
+                                .zip(&b[c])
+                                .map(|(p, q)| (p - q) / (2.0 * h))
+                                .collect()
+                        })
                         .collect()
                 };
                 // θ1…θ6 and the initial state (the candidates' columns are differences already).
@@ -861,7 +923,11 @@ mod tests {
                         let got: Vec<f64> = if j < th.len() {
                             sens.theta[c].column(j).iter().copied().collect()
                         } else {
-                            sens.initial[c].column(j - th.len()).iter().copied().collect()
+                            sens.initial[c]
+                                .column(j - th.len())
+                                .iter()
+                                .copied()
+                                .collect()
                         };
                         let scale = want[c].iter().fold(0.0f64, |a, x| a.max(x.abs()));
                         let err = got

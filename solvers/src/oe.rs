@@ -197,8 +197,11 @@ struct Problem<'a, M: ?Sized> {
     /// Initial states when they are not estimated.
     fixed_initial: Option<Vec<Vec<f64>>>,
     u: na::DVector<f64>,
-    /// Offsets of each recording's rows.
+    /// Offsets of each recording's rows (its samples in the cost, both channels).
     offsets: Vec<usize>,
+    /// Per recording, the samples that enter the cost (the mask's), in time order: row
+    /// `offsets[r] + i·s + c` is sample `index[r][i]`, channel c.
+    index: Vec<Vec<usize>>,
     /// Per recording, whether each sample enters the cost.
     mask: Vec<Vec<bool>>,
     /// Forward instead of central differences.
@@ -371,8 +374,8 @@ impl<M: DynamicModel + ?Sized> Problem<'_, M> {
         for (r, rec) in self.recs.iter().enumerate() {
             let sens = self.sensitivities(&theta, &self.initial_of(u, r), rec, cached[r].take())?;
             for (c, (sc, &w)) in sens.iter().zip(&self.weight).enumerate() {
-                for k in (0..rec.len()).filter(|&k| self.mask[r][k]) {
-                    let row = self.offsets[r] + k * s + c;
+                for (i, &k) in self.index[r].iter().enumerate() {
+                    let row = self.offsets[r] + i * s + c;
                     for j in 0..p {
                         jac[(row, j)] = -w * sc[(k, j)];
                     }
@@ -415,8 +418,8 @@ impl<M: DynamicModel + ?Sized> LeastSquaresProblem<f64, na::Dyn, na::Dyn> for Pr
         let mut out = na::DVector::zeros(self.rows);
         for (r, per) in raw.iter().enumerate() {
             for (c, e) in per.iter().enumerate() {
-                for (k, x) in e.iter().enumerate().filter(|(k, _)| self.mask[r][*k]) {
-                    out[self.offsets[r] + k * s + c] = self.weight[c] * x;
+                for (i, &k) in self.index[r].iter().enumerate() {
+                    out[self.offsets[r] + i * s + c] = self.weight[c] * e[k];
                 }
             }
         }
@@ -516,14 +519,18 @@ impl OutputError {
             }
             None => recordings.iter().map(|r| vec![true; r.len()]).collect(),
         };
+        // Only the residuals that count are rows of the problem.
+        let index: Vec<Vec<usize>> = mask
+            .iter()
+            .map(|m| (0..m.len()).filter(|&k| m[k]).collect())
+            .collect();
         let mut offsets = Vec::with_capacity(recordings.len());
         let mut rows = 0;
-        for rec in recordings {
+        for ix in &index {
             offsets.push(rows);
-            rows += rec.len() * s;
+            rows += ix.len() * s;
         }
-        // Residuals that count: the masked-out rows stay in place as zeros.
-        let active = s * mask.iter().flatten().filter(|&&b| b).count();
+        let active = rows;
         if active <= unknowns {
             return Err(SolveError::InvalidProblem(format!(
                 "{active} residuals cannot determine {unknowns} unknowns"
@@ -545,6 +552,7 @@ impl OutputError {
             fixed_initial: (!self.estimate_initial).then(|| first.clone()),
             u: na::DVector::from_vec(u0),
             offsets,
+            index,
             mask,
             forward: self.forward_differences,
             rows,
@@ -620,8 +628,8 @@ impl OutputError {
         let mut e = DVector::zeros(rows);
         for (r, per) in raw.iter().enumerate() {
             for (c, ec) in per.iter().enumerate() {
-                for (k, x) in ec.iter().enumerate().filter(|(k, _)| problem.mask[r][*k]) {
-                    e[problem.offsets[r] + k * s + c] = problem.weight[c] * x;
+                for (i, &k) in problem.index[r].iter().enumerate() {
+                    e[problem.offsets[r] + i * s + c] = problem.weight[c] * ec[k];
                 }
             }
         }
@@ -658,12 +666,20 @@ impl OutputError {
             correlation_lags: 0,
         };
         let d = ols::decompose(&lp, 1e-12)?;
-        let spans: Vec<(usize, usize)> = problem
-            .offsets
-            .iter()
-            .zip(recordings)
-            .map(|(&o, r)| (o, r.len()))
-            .collect();
+        // Runs of consecutive samples: the lags of the long-run covariance stay inside them.
+        let mut spans: Vec<(usize, usize)> = Vec::new();
+        for (&o, ix) in problem.offsets.iter().zip(&problem.index) {
+            for (i, &k) in ix.iter().enumerate() {
+                match spans.last_mut() {
+                    Some((start, n))
+                        if i > 0 && ix[i - 1] + 1 == k && *start + *n * s == o + i * s =>
+                    {
+                        *n += 1
+                    }
+                    _ => spans.push((o + i * s, 1)),
+                }
+            }
+        }
         let full = sandwich(&d, &jac_free, &e, &spans, s, lags, active);
         let mut covariance = DMatrix::zeros(p, p);
         for (a, &i) in keep.iter().enumerate().filter(|(_, i)| **i < p) {
