@@ -46,19 +46,32 @@ pub fn accel(theta: &[f64; 6], v: f64, w: f64, v_ref: f64, w_ref: f64) -> (f64, 
     )
 }
 
+/// A command that varies linearly over an integration step: what [`rk4_step`] needs of it.
+pub(crate) trait StepCommand: Copy {
+    /// The command halfway between `self` and `other`.
+    fn midpoint(&self, other: &Self) -> Self;
+}
+
+impl StepCommand for (f64, f64) {
+    #[inline(always)]
+    fn midpoint(&self, other: &Self) -> Self {
+        ((self.0 + other.0) * 0.5, (self.1 + other.1) * 0.5)
+    }
+}
+
 /// One classical RK4 step of ẋ = f(x, u) of length `h`, with the command varying linearly from
 /// `u0` to `u1` over the step (its midpoint for the middle stages); adds ∫x over the step, by the
 /// same stages, to `q` — window averages to the same order as the state.
 #[inline(always)]
-pub(crate) fn rk4_step<const N: usize>(
-    f: impl Fn(&[f64; N], (f64, f64)) -> [f64; N],
+pub(crate) fn rk4_step<const N: usize, U: StepCommand>(
+    f: impl Fn(&[f64; N], U) -> [f64; N],
     x: &mut [f64; N],
     q: &mut [f64; N],
-    u0: (f64, f64),
-    u1: (f64, f64),
+    u0: U,
+    u1: U,
     h: f64,
 ) {
-    let um = ((u0.0 + u1.0) * 0.5, (u0.1 + u1.1) * 0.5);
+    let um = u0.midpoint(&u1);
     let k1 = f(x, u0);
     let x2: [f64; N] = std::array::from_fn(|i| x[i] + 0.5 * h * k1[i]);
     let k2 = f(&x2, um);
@@ -127,6 +140,7 @@ pub fn check_theta(theta: &[f64]) -> Result<[f64; 6]> {
 }
 
 /// What both simulations check and read first.
+#[derive(Clone, Copy)]
 struct Setup {
     th: [f64; 6],
     v0: f64,
@@ -179,9 +193,15 @@ pub fn simulate(theta: &[f64], rec: &Recording, initial: &[f64]) -> Result<[Vec<
     let mut v_out = Vec::with_capacity(n);
     let mut w_out = Vec::with_capacity(n);
     let h_max = substep(&th);
+    let [t1, t2, t3, t4, t5, t6] = th;
+    let (i1, i2) = (1.0 / t1, 1.0 / t2);
+    // eq. 2.19 as `accel`, multiplying by 1/θ1, 1/θ2 (the step's critical path).
     let f = |x: &[f64; 2], u: (f64, f64)| {
-        let (dv, dw) = accel(&th, x[0], x[1], u.0, u.1);
-        [dv, dw]
+        let [v, w] = *x;
+        [
+            (t3 * w * w - t4 * v + u.0) * i1,
+            (-t5 * v * w - t6 * w + u.1) * i2,
+        ]
     };
     let mut x = [v0, w0];
     v_out.push(v0);
@@ -200,47 +220,60 @@ pub fn simulate(theta: &[f64], rec: &Recording, initial: &[f64]) -> Result<[Vec<
 
 /// Number of sensitivity columns: θ1…θ6, then v0, ω0.
 const NS: usize = 8;
-/// Augmented state: v, ω, then S row-major (∂v/∂p, ∂ω/∂p).
-const NZ: usize = 2 + 2 * NS;
+/// Columns per pass: the eight are integrated in two passes of four, on two threads.
+const HALF: usize = NS / 2;
+/// Augmented state of a pass: v, ω, then S row-major (∂v/∂p, ∂ω/∂p) for its four columns.
+const NZ: usize = 2 + 2 * HALF;
 
-/// Derivative of the augmented state z = (v, ω, S) for commands u.
+/// Derivative of the augmented state z = (v, ω, S) for commands u, S holding the columns
+/// `cols` of p = (θ1…θ6, v0, ω0).
 #[inline]
-fn augmented_rhs(theta: &[f64; 6], z: &[f64; NZ], u: (f64, f64)) -> [f64; NZ] {
-    let [t1, t2, t3, t4, t5, t6] = *theta;
+fn augmented_rhs(
+    theta: &[f64; 6],
+    inv: [f64; 2],
+    cols: &[usize; HALF],
+    z: &[f64; NZ],
+    u: (f64, f64),
+) -> [f64; NZ] {
+    let [_, _, t3, t4, t5, t6] = *theta;
+    let [i1, i2] = inv;
     let (v, w) = (z[0], z[1]);
-    let (dv, dw) = accel(theta, v, w, u.0, u.1);
+    let (dv, dw) = (
+        (t3 * w * w - t4 * v + u.0) * i1,
+        (-t5 * v * w - t6 * w + u.1) * i2,
+    );
     let a = [
-        [-t4 / t1, 2.0 * t3 * w / t1],
-        [-t5 * w / t2, -(t5 * v + t6) / t2],
+        [-t4 * i1, 2.0 * t3 * w * i1],
+        [-t5 * w * i2, -(t5 * v + t6) * i2],
     ];
     let mut out = [0.0; NZ];
     out[0] = dv;
     out[1] = dw;
-    for j in 0..NS {
-        let (sv, sw) = (z[2 + j], z[2 + NS + j]);
+    for (j, &col) in cols.iter().enumerate() {
+        let (sv, sw) = (z[2 + j], z[2 + HALF + j]);
         out[2 + j] = a[0][0] * sv + a[0][1] * sw;
-        out[2 + NS + j] = a[1][0] * sv + a[1][1] * sw;
+        out[2 + HALF + j] = a[1][0] * sv + a[1][1] * sw;
+        // B = ∂f/∂θ (module doc); the initial state has no source.
+        match col {
+            0 => out[2 + j] -= dv * i1,
+            1 => out[2 + HALF + j] -= dw * i2,
+            2 => out[2 + j] += w * w * i1,
+            3 => out[2 + j] -= v * i1,
+            4 => out[2 + HALF + j] -= v * w * i2,
+            5 => out[2 + HALF + j] -= w * i2,
+            _ => {}
+        }
     }
-    out[2] += -dv / t1;
-    out[2 + 2] += w * w / t1;
-    out[2 + 3] += -v / t1;
-    out[2 + NS + 1] += -dw / t2;
-    out[2 + NS + 4] += -v * w / t2;
-    out[2 + NS + 5] += -w / t2;
     out
 }
 
-/// Free-run simulation as [`simulate`], with the output sensitivities to θ (n × 6 per channel)
-/// and to the initial state (n × 2 per channel), from the forward sensitivity equations in the
-/// module doc, integrated by the same RK4 sub-steps.
-///
-/// # Errors
-/// As [`simulate`].
-pub fn simulate_with_sensitivities(
-    theta: &[f64],
+/// One pass of [`simulate_with_sensitivities`]: the outputs and the sensitivities to the
+/// columns `cols` of (θ1…θ6, v0, ω0), per channel n × 4.
+fn sensitivity_pass(
+    setup: &Setup,
     rec: &Recording,
-    initial: &[f64],
-) -> Result<([Vec<f64>; 2], Sensitivities)> {
+    cols: [usize; HALF],
+) -> ([Vec<f64>; 2], [DMatrix<f64>; 2]) {
     let Setup {
         th,
         v0,
@@ -248,15 +281,20 @@ pub fn simulate_with_sensitivities(
         n,
         hold,
         avg,
-    } = setup(theta, rec, initial)?;
+    } = *setup;
     let h_max = substep(&th);
     let mut z = [0.0; NZ];
     z[0] = v0;
     z[1] = w0;
-    z[2 + 6] = 1.0; // ∂v/∂v0
-    z[2 + NS + 7] = 1.0; // ∂ω/∂ω0
+    for (j, &col) in cols.iter().enumerate() {
+        match col {
+            6 => z[2 + j] = 1.0,        // ∂v/∂v0
+            7 => z[2 + HALF + j] = 1.0, // ∂ω/∂ω0
+            _ => {}
+        }
+    }
     let mut y = [Vec::with_capacity(n), Vec::with_capacity(n)];
-    let mut sens = [DMatrix::zeros(n, NS), DMatrix::zeros(n, NS)];
+    let mut sens = [DMatrix::zeros(n, HALF), DMatrix::zeros(n, HALF)];
     let store = |k: usize,
                  x: &[f64; NZ],
                  scale: f64,
@@ -264,13 +302,14 @@ pub fn simulate_with_sensitivities(
                  sens: &mut [DMatrix<f64>; 2]| {
         for ch in 0..2 {
             y[ch].push(x[ch] * scale);
-            for j in 0..NS {
-                sens[ch][(k, j)] = x[2 + ch * NS + j] * scale;
+            for j in 0..HALF {
+                sens[ch][(k, j)] = x[2 + ch * HALF + j] * scale;
             }
         }
     };
     store(0, &z, 1.0, &mut y, &mut sens);
-    let f = |z: &[f64; NZ], u: (f64, f64)| augmented_rhs(&th, z, u);
+    let inv = [1.0 / th[0], 1.0 / th[1]];
+    let f = |z: &[f64; NZ], u: (f64, f64)| augmented_rhs(&th, inv, &cols, z, u);
     for k in 1..n {
         let mut q = [0.0; NZ];
         let span = for_each_substep(rec, k, hold, h_max, |u0, u1, h| {
@@ -282,10 +321,54 @@ pub fn simulate_with_sensitivities(
             store(k, &z, 1.0, &mut y, &mut sens);
         }
     }
-    let [sv, sw] = sens;
-    let split = |s: DMatrix<f64>| (s.columns(0, 6).into_owned(), s.columns(6, 2).into_owned());
-    let (tv, iv) = split(sv);
-    let (tw, iw) = split(sw);
+    (y, sens)
+}
+
+/// Free-run simulation as [`simulate`], with the output sensitivities to θ (n × 6 per channel)
+/// and to the initial state (n × 2 per channel), from the forward sensitivity equations in the
+/// module doc, integrated by the same RK4 sub-steps — in two passes of four columns, on two
+/// threads.
+///
+/// # Errors
+/// As [`simulate`].
+pub fn simulate_with_sensitivities(
+    theta: &[f64],
+    rec: &Recording,
+    initial: &[f64],
+) -> Result<([Vec<f64>; 2], Sensitivities)> {
+    let setup = setup(theta, rec, initial)?;
+    let n = setup.n;
+    let ((y, first), second) = std::thread::scope(|scope| {
+        let other = scope.spawn(|| sensitivity_pass(&setup, rec, [4, 5, 6, 7]));
+        let mine = sensitivity_pass(&setup, rec, [0, 1, 2, 3]);
+        (mine, other.join())
+    });
+    let (_, second) =
+        second.map_err(|_| Error::InvalidSetting("the sensitivity pass panicked".into()))?;
+    // Columns 0–3 from the first pass, 4–7 from the second.
+    let col = |c: usize, j: usize| {
+        if j < HALF {
+            first[c].column(j)
+        } else {
+            second[c].column(j - HALF)
+        }
+    };
+    let theta_sens = [0, 1].map(|c| {
+        let mut m = DMatrix::zeros(n, 6);
+        for j in 0..6 {
+            m.set_column(j, &col(c, j));
+        }
+        m
+    });
+    let initial_sens = [0, 1].map(|c| {
+        let mut m = DMatrix::zeros(n, 2);
+        for i in 0..2 {
+            m.set_column(i, &col(c, 6 + i));
+        }
+        m
+    });
+    let [tv, tw] = theta_sens;
+    let [iv, iw] = initial_sens;
     Ok((
         y,
         Sensitivities {

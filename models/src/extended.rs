@@ -26,15 +26,17 @@
 //! the recording's grid merged with the delayed command switches and the payload time
 //! ([`crate::delay`]), so that every parameter moves the outputs continuously; outputs are
 //! instants or window averages as the recording says. Parameters: θ1…θ6, then each candidate's
-//! in the order given. No analytic sensitivities: the output-error fitter differentiates.
+//! in the order given. Sensitivities: θ and the initial state analytic, the candidates' parameters
+//! by forward differences ([`Extended::sensitivities_of`]).
 
 use serde::{Deserialize, Serialize};
 use wheelid_core::{
-    ChannelInfo, CommandHold, DynamicModel, Error, ParamInfo, Recording, Result, Simulation,
-    VelocitySampling,
+    ChannelInfo, CommandHold, DynamicModel, Error, ParamInfo, Recording, Result, Sensitivities,
+    Simulation, VelocitySampling,
 };
 
-use crate::delay::{InputDelay, holding_command, merged_grid};
+use crate::delay::{holding_command, merged_grid};
+use crate::dynamics::StepCommand;
 use crate::{dynamics, regressor};
 
 /// Shortest time constant θ1/θ4, θ2/θ6 the extended model accepts [s].
@@ -339,6 +341,195 @@ impl DynamicModel for Extended {
     }
     fn simulate(&self, theta: &[f64], rec: &Recording, initial: &[f64]) -> Result<Simulation> {
         let (th0, ph) = self.physics(theta)?;
+        let y = self.integrate::<2, 0>(&th0, &ph, rec, initial, [])?;
+        Ok(y.to_vec())
+    }
+
+    fn simulate_with_sensitivities(
+        &self,
+        theta: &[f64],
+        rec: &Recording,
+        initial: &[f64],
+    ) -> Result<Option<(Simulation, Sensitivities)>> {
+        let all: Vec<usize> = (0..self.params.len()).collect();
+        self.sensitivities_of(theta, rec, initial, &all).map(Some)
+    }
+}
+
+/// Sensitivity columns integrated analytically: θ1…θ6, v0, ω0.
+const NS: usize = 8;
+/// Columns per sensitivity pass: the eight are integrated in two passes of four, on two
+/// threads (each a state of 2 + 2·4).
+const HALF: usize = NS / 2;
+/// The augmented state of a sensitivity pass: v, ω, ∂v/∂p, ∂ω/∂p for its four columns.
+const NZ: usize = 2 + 2 * HALF;
+
+/// A command (v, ω setpoints after the pipeline) and its sensitivities to (θ1…θ6, v0, ω0):
+/// `M` = 0 in a plain simulation, [`HALF`] in a sensitivity pass.
+/// `live` is false while `du` is zero (almost always: the command depends on (θ, x0) only before
+/// the first delayed command and while a rate limit slews from the holding command), so that
+/// the pass skips it.
+#[derive(Clone, Copy)]
+struct Cmd<const M: usize> {
+    u: [f64; 2],
+    du: [[f64; M]; 2],
+    live: bool,
+}
+
+impl<const M: usize> Cmd<M> {
+    fn at(u: [f64; 2], du: [[f64; M]; 2], live: bool) -> Self {
+        Self { u, du, live }
+    }
+    /// `self` + f (`other` − `self`).
+    fn lerp(&self, other: &Self, f: f64) -> Self {
+        let mut out = *self;
+        out.u = [0, 1].map(|k| self.u[k] + f * (other.u[k] - self.u[k]));
+        if self.live || other.live {
+            out.du = [0, 1].map(|k| {
+                std::array::from_fn(|j| self.du[k][j] + f * (other.du[k][j] - self.du[k][j]))
+            });
+            out.live = true;
+        }
+        out
+    }
+}
+
+impl<const M: usize> StepCommand for Cmd<M> {
+    #[inline(always)]
+    fn midpoint(&self, other: &Self) -> Self {
+        self.lerp(other, 0.5)
+    }
+}
+
+impl Extended {
+    /// The simulation with its output sensitivities to the parameters `columns` (indices into
+    /// θ, in that order) and to the initial state: θ1…θ6 and (v0, ω0) by the forward
+    /// sensitivity equations integrated alongside the state (below), the candidates'
+    /// parameters by forward differences of [`DynamicModel::simulate`] (step 1e-5 (|β| +
+    /// 10⁻³ max|θ1…6|)), run on other threads while the state integrates.
+    ///
+    /// With z = (v, ω), p = (θ1…θ6, v0, ω0), f the right-hand side of the module doc and u
+    /// the command after the pipeline:
+    ///
+    /// ```text
+    /// Ṡ = ∂f/∂z S + ∂f/∂θ + ∂f/∂u ∂u/∂p,    S(t0) = [0 | I₂]
+    /// ```
+    ///
+    /// where u depends on p only through the command that holds the initial state (before the
+    /// first delayed command, and where the rate limit starts), and the clip and the slew pass
+    /// its sensitivity on where they do not bind. After a payload change θ1, θ2, θ3, θ5 are no
+    /// longer in force and their columns integrate without a source.
+    ///
+    /// # Errors
+    /// As [`DynamicModel::simulate`], or [`Error::InvalidSetting`] for a column out of range.
+    pub fn sensitivities_of(
+        &self,
+        theta: &[f64],
+        rec: &Recording,
+        initial: &[f64],
+        columns: &[usize],
+    ) -> Result<(Simulation, Sensitivities)> {
+        let (th0, ph) = self.physics(theta)?;
+        if let Some(&j) = columns.iter().find(|&&j| j >= self.params.len()) {
+            return Err(Error::InvalidSetting(format!(
+                "sensitivity column {j} of {} parameters",
+                self.params.len()
+            )));
+        }
+        let scale = th0.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+        let step = |j: usize| 1e-5 * (theta[j].abs() + 1e-3 * scale);
+        let (z, fd) = std::thread::scope(|scope| {
+            let handles: Vec<_> = columns
+                .iter()
+                .filter(|&&j| j >= 6)
+                .map(|&j| {
+                    scope.spawn(move || {
+                        let mut th = theta.to_vec();
+                        th[j] += step(j);
+                        let (t, p) = self.physics(&th)?;
+                        self.integrate::<2, 0>(&t, &p, rec, initial, [])
+                    })
+                })
+                .collect();
+            let second =
+                scope.spawn(|| self.integrate::<NZ, HALF>(&th0, &ph, rec, initial, [4, 5, 6, 7]));
+            let first = self.integrate::<NZ, HALF>(&th0, &ph, rec, initial, [0, 1, 2, 3]);
+            let z = first.and_then(|a| {
+                let b = second.join().unwrap_or_else(|_| {
+                    Err(Error::InvalidSetting("a simulation panicked".into()))
+                })?;
+                Ok((a, b))
+            });
+            let fd: Vec<Result<[Vec<f64>; 2]>> = handles
+                .into_iter()
+                .map(|h| {
+                    h.join().unwrap_or_else(|_| {
+                        Err(Error::InvalidSetting("a simulation panicked".into()))
+                    })
+                })
+                .collect();
+            (z, fd)
+        });
+        let (za, zb) = z?;
+        // Column j of (θ1…θ6, v0, ω0), channel c.
+        let col = |c: usize, j: usize| {
+            let (z, a) = if j < HALF { (&za, j) } else { (&zb, j - HALF) };
+            &z[2 + c * HALF + a]
+        };
+        let z = &za;
+        let n = rec.len();
+        let mut fd = fd.into_iter();
+        let mut sens_theta = [
+            nalgebra::DMatrix::zeros(n, columns.len()),
+            nalgebra::DMatrix::zeros(n, columns.len()),
+        ];
+        for (a, &j) in columns.iter().enumerate() {
+            if j < 6 {
+                for c in 0..2 {
+                    for (k, x) in col(c, j).iter().enumerate() {
+                        sens_theta[c][(k, a)] = *x;
+                    }
+                }
+            } else {
+                let up = fd
+                    .next()
+                    .ok_or_else(|| Error::InvalidSetting("missing difference".into()))??;
+                let h = step(j);
+                for c in 0..2 {
+                    for k in 0..n {
+                        sens_theta[c][(k, a)] = (up[c][k] - z[c][k]) / h;
+                    }
+                }
+            }
+        }
+        let sens_initial =
+            [0, 1].map(|c| nalgebra::DMatrix::from_fn(n, 2, |k, i| col(c, 6 + i)[k]));
+        let [tv, tw] = sens_theta;
+        let [iv, iw] = sens_initial;
+        let y: Simulation = za.into_iter().take(2).collect();
+        Ok((
+            y,
+            Sensitivities {
+                theta: vec![tv, tw],
+                initial: vec![iv, iw],
+            },
+        ))
+    }
+
+    /// The simulation of the module doc on the recording's samples: with `N` = 2, `M` = 0 the
+    /// outputs (v̂, ω̂); with `N` = [`NZ`], `M` = [`HALF`] also their sensitivities to the
+    /// parameters `cols` of (θ1…θ6, v0, ω0) (channels 2 + c·M + a: ∂ŷ_c/∂p_cols[a]).
+    fn integrate<const N: usize, const M: usize>(
+        &self,
+        th0: &[f64; 6],
+        ph: &Physics,
+        rec: &Recording,
+        initial: &[f64],
+        cols: [usize; M],
+    ) -> Result<[Vec<f64>; N]> {
+        let sens = M > 0;
+        // Where each parameter's column sits in this pass (None: not in it).
+        let slot = |j: usize| cols.iter().position(|&c| c == j);
         let &[v0, w0] = initial else {
             return Err(Error::InvalidSetting(format!(
                 "initial state must be [v, ω], got {} values",
@@ -350,19 +541,55 @@ impl DynamicModel for Extended {
         let th_after = ph
             .payload
             .map(|(_, a)| [a[0], a[1], a[2], th0[3], a[3], th0[5]]);
-        let theta_at = |t: f64| match (ph.payload, th_after) {
-            (Some((ts, _)), Some(a)) if t >= ts => a,
-            _ => th0,
-        };
         let zoh = rec.command_hold() == CommandHold::Zoh;
         let avg = rec.velocity_sampling() == VelocitySampling::WindowAverage;
         let t0 = rec.t[0];
         let d = self.track;
-        // Setpoint pipeline after the delay: saturation → rate limit (state) → asymmetry → drift.
-        let target = |c: (f64, f64)| match ph.sat {
-            Some([vm, wm]) => [c.0.clamp(-vm, vm), c.1.clamp(-wm, wm)],
-            None => [c.0, c.1],
+        // The command that holds the initial state, and its sensitivity to (θ, x0).
+        let hold = holding_command(th0, initial);
+        let mut dhold = [[0.0; M]; 2];
+        if sens {
+            let [_, _, t3, t4, t5, t6] = *th0;
+            // (θ4 v0 − θ3 ω0², θ5 v0 ω0 + θ6 ω0)
+            for (j, dv, dw) in [
+                (2, -w0 * w0, 0.0),
+                (3, v0, 0.0),
+                (4, 0.0, v0 * w0),
+                (5, 0.0, w0),
+                (6, t4, t5 * w0),
+                (7, -2.0 * t3 * w0, t5 * v0 + t6),
+            ] {
+                if let Some(a) = slot(j) {
+                    dhold[0][a] = dv;
+                    dhold[1][a] = dw;
+                }
+            }
+        }
+        let mut cursor = CommandCursor::new(rec, hold);
+        // The recorded command at τ (the holding one before the record).
+        let mut command = |tau: f64| {
+            let c = cursor.at(tau);
+            if sens && tau < t0 {
+                Cmd::at([c.0, c.1], dhold, true)
+            } else {
+                Cmd::at([c.0, c.1], [[0.0; M]; 2], false)
+            }
         };
+        // Setpoint pipeline after the delay: saturation → rate limit (state) → asymmetry → drift.
+        let target = |c: Cmd<M>| match ph.sat {
+            Some(lim) => {
+                let mut out = c;
+                for k in 0..2 {
+                    if c.u[k].abs() > lim[k] {
+                        out.u[k] = c.u[k].clamp(-lim[k], lim[k]);
+                        out.du[k] = [0.0; M];
+                    }
+                }
+                out
+            }
+            None => c,
+        };
+        // Linear in the setpoint: the same map takes its sensitivities.
         let shape = |s: [f64; 2], t: f64| {
             let [mut uv, mut uw] = s;
             if let Some(rho) = ph.ratio {
@@ -374,78 +601,160 @@ impl DynamicModel for Extended {
             let g = 1.0 + ph.drift * (t - t0);
             [uv * g, uw * g]
         };
+        let shaped = |c: &Cmd<M>, t: f64| {
+            let mut out = *c;
+            out.u = shape(c.u, t);
+            if c.live {
+                for j in 0..M {
+                    let col = shape([c.du[0][j], c.du[1][j]], t);
+                    out.du[0][j] = col[0];
+                    out.du[1][j] = col[1];
+                }
+            }
+            out
+        };
         // Dry friction only when present: tanh dominates the cost of a step.
         let dry = ph.coulomb != [0.0, 0.0];
-        let rhs = |th: &[f64; 6], v: f64, w: f64, u: [f64; 2]| {
-            let mut fv = u[0] + th[2] * w * w - th[3] * v - th[3] * ph.slip[0] * v * w.abs();
-            let mut fw = u[1] - th[4] * v * w - th[5] * w - th[5] * ph.slip[1] * v.abs() * w;
+        // θ with the reciprocals of θ1, θ2 and its integration sub-step, before and after a
+        // payload change: a step multiplies instead of dividing.
+        let prepare = |th: [f64; 6], after: bool| {
+            (
+                th,
+                [1.0 / th[0], 1.0 / th[1]],
+                dynamics::substep(&th),
+                after,
+            )
+        };
+        let (before, after) = (prepare(*th0, false), th_after.map(|a| prepare(a, true)));
+        let [kv, kw] = ph.slip;
+        let rhs = |th: &[f64; 6], inv: &[f64; 2], changed: bool, z: &[f64; N], c: Cmd<M>| {
+            let (v, w) = (z[0], z[1]);
+            let u = c.u;
+            let mut fv = u[0] + th[2] * w * w - th[3] * v - th[3] * kv * v * w.abs();
+            let mut fw = u[1] - th[4] * v * w - th[5] * w - th[5] * kw * v.abs() * w;
+            let (mut dry_v, mut dry_w) = (0.0, 0.0);
             if dry {
-                fv -= ph.coulomb[0] * (v / FRICTION_EPS[0]).tanh();
-                fw -= ph.coulomb[1] * (w / FRICTION_EPS[1]).tanh();
+                let (tv, tw) = ((v / FRICTION_EPS[0]).tanh(), (w / FRICTION_EPS[1]).tanh());
+                fv -= ph.coulomb[0] * tv;
+                fw -= ph.coulomb[1] * tw;
+                dry_v = ph.coulomb[0] * (1.0 - tv * tv) / FRICTION_EPS[0];
+                dry_w = ph.coulomb[1] * (1.0 - tw * tw) / FRICTION_EPS[1];
             }
-            [fv / th[0], fw / th[1]]
+            let mut out = [0.0; N];
+            out[0] = fv * inv[0];
+            out[1] = fw * inv[1];
+            if sens {
+                let sign = |x: f64| if x == 0.0 { 0.0 } else { x.signum() };
+                let a00 = (-th[3] * (1.0 + kv * w.abs()) - dry_v) * inv[0];
+                let a01 = (2.0 * th[2] * w - th[3] * kv * v * sign(w)) * inv[0];
+                let a10 = (-th[4] * w - th[5] * kw * sign(v) * w) * inv[1];
+                let a11 = (-th[4] * v - th[5] * (1.0 + kw * v.abs()) - dry_w) * inv[1];
+                for a in 0..M {
+                    let (sv, sw) = (z[2 + a], z[2 + M + a]);
+                    out[2 + a] = a00 * sv + a01 * sw;
+                    out[2 + M + a] = a10 * sv + a11 * sw;
+                    if c.live {
+                        out[2 + a] += c.du[0][a] * inv[0];
+                        out[2 + M + a] += c.du[1][a] * inv[1];
+                    }
+                    // ∂f/∂θ (θ1, θ2, θ3, θ5 no longer in force after a payload change).
+                    match cols[a] {
+                        0 if !changed => out[2 + a] -= out[0] * inv[0],
+                        1 if !changed => out[2 + M + a] -= out[1] * inv[1],
+                        2 if !changed => out[2 + a] += w * w * inv[0],
+                        3 => out[2 + a] -= v * (1.0 + kv * w.abs()) * inv[0],
+                        4 if !changed => out[2 + M + a] -= v * w * inv[1],
+                        5 => out[2 + M + a] -= w * (1.0 + kw * v.abs()) * inv[1],
+                        _ => {}
+                    }
+                }
+            }
+            out
         };
         // The rate-limited setpoint starts where it holds the initial state (a robot at rest
         // holds zero), as the simulator's.
-        let hold = holding_command(&th0, initial);
-        let mut setpoint = target(InputDelay::command_at(rec, t0 - ph.delay, hold));
-        if ph.accel.is_some() {
-            setpoint = [hold.0, hold.1];
-        }
+        let mut setpoint = if ph.accel.is_some() {
+            Cmd::at([hold.0, hold.1], dhold, sens)
+        } else {
+            target(command(t0 - ph.delay))
+        };
         let fixed_setpoint = zoh && ph.accel.is_none() && ph.drift == 0.0;
-        let mut cursor = CommandCursor::new(rec, hold);
         let m = grid.len();
-        let mut y = [Vec::with_capacity(m), Vec::with_capacity(m)];
-        let mut s = [v0, w0];
-        y[0].push(v0);
-        y[1].push(w0);
+        let mut z = [0.0; N];
+        z[0] = v0;
+        z[1] = w0;
+        if let Some(a) = slot(6) {
+            z[2 + a] = 1.0;
+        }
+        if let Some(a) = slot(7) {
+            z[2 + M + a] = 1.0;
+        }
+        let mut y: [Vec<f64>; N] = std::array::from_fn(|c| {
+            let mut v = Vec::with_capacity(m);
+            v.push(z[c]);
+            v
+        });
         for i in 1..m {
             let (ta, tb) = (grid[i - 1], grid[i]);
             let span = tb - ta;
-            let th = theta_at(0.5 * (ta + tb));
-            let ca = cursor.at(if zoh { 0.5 * (ta + tb) } else { ta } - ph.delay);
-            let cb = if zoh { ca } else { cursor.at(tb - ph.delay) };
-            let rhs_at = |x: &[f64; 2], u: (f64, f64)| rhs(&th, x[0], x[1], [u.0, u.1]);
-            let h_max = dynamics::substep(&th);
+            let (th, inv, h_max, changed) = match (ph.payload, after) {
+                (Some((ts, _)), Some(a)) if 0.5 * (ta + tb) >= ts => a,
+                _ => before,
+            };
+            let ca = command(if zoh { 0.5 * (ta + tb) } else { ta } - ph.delay);
+            let cb = if zoh { ca } else { command(tb - ph.delay) };
+            let rhs_at = |x: &[f64; N], c: Cmd<M>| rhs(&th, &inv, changed, x, c);
             let steps = (span / h_max).ceil().max(1.0) as usize;
             let h = span / steps as f64;
-            let mut q = [0.0; 2];
+            let mut q = [0.0; N];
             if fixed_setpoint {
                 // Held command, no rate limit, no drift: one setpoint for the whole interval.
-                let u = shape(target(ca), ta);
-                for _ in 0..steps {
-                    dynamics::rk4_step(rhs_at, &mut s, &mut q, (u[0], u[1]), (u[0], u[1]), h);
-                }
                 setpoint = target(ca);
+                let u = shaped(&setpoint, ta);
+                for _ in 0..steps {
+                    dynamics::rk4_step(rhs_at, &mut z, &mut q, u, u, h);
+                }
             }
             for j in (0..steps).filter(|_| !fixed_setpoint) {
                 let (f0, f1) = (j as f64 / steps as f64, (j + 1) as f64 / steps as f64);
-                let c_at = |f: f64| (ca.0 + f * (cb.0 - ca.0), ca.1 + f * (cb.1 - ca.1));
                 let (tau0, tau1) = (ta + j as f64 * h, ta + (j + 1) as f64 * h);
                 let s0 = setpoint;
-                let tgt = target(c_at(f1));
+                let tgt = target(ca.lerp(&cb, f1));
                 let s1 = match ph.accel {
-                    Some(a) => [0, 1].map(|k| s0[k] + (tgt[k] - s0[k]).clamp(-a[k] * h, a[k] * h)),
+                    Some(a) => {
+                        let mut s1 = tgt;
+                        for k in 0..2 {
+                            let step = a[k] * h;
+                            s1.u[k] = s0.u[k] + (tgt.u[k] - s0.u[k]).clamp(-step, step);
+                            // Slewing, the setpoint keeps its own sensitivity.
+                            if (tgt.u[k] - s0.u[k]).abs() > step {
+                                s1.du[k] = s0.du[k];
+                                s1.live |= s0.live;
+                            }
+                        }
+                        s1
+                    }
                     None => tgt,
                 };
                 let s_start = if ph.accel.is_some() {
                     s0
                 } else {
-                    target(c_at(f0))
+                    target(ca.lerp(&cb, f0))
                 };
-                let u0 = shape(s_start, tau0);
-                let u1 = shape(s1, tau1);
-                dynamics::rk4_step(rhs_at, &mut s, &mut q, (u0[0], u0[1]), (u1[0], u1[1]), h);
+                let u0 = shaped(&s_start, tau0);
+                let u1 = shaped(&s1, tau1);
+                dynamics::rk4_step(rhs_at, &mut z, &mut q, u0, u1, h);
                 setpoint = s1;
             }
-            for c in 0..2 {
-                y[c].push(if avg { q[c] / span } else { s[c] });
+            for (c, yc) in y.iter_mut().enumerate() {
+                yc.push(if avg { q[c] / span } else { z[c] });
             }
         }
         // Back to the recording's samples: instants, or length-weighted window averages.
-        let mut out = [Vec::with_capacity(rec.len()), Vec::with_capacity(rec.len())];
-        for (k, &i) in index.iter().enumerate() {
-            for (o, yc) in out.iter_mut().zip(&y) {
+        Ok(std::array::from_fn(|c| {
+            let yc = &y[c];
+            let mut o = Vec::with_capacity(rec.len());
+            for (k, &i) in index.iter().enumerate() {
                 if !avg || k == 0 {
                     o.push(yc[i]);
                 } else {
@@ -454,14 +763,15 @@ impl DynamicModel for Extended {
                     o.push(total / (grid[i] - grid[i0]));
                 }
             }
-        }
-        Ok(out.to_vec())
+            o
+        }))
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::delay::InputDelay;
 
     const THETA: [f64; 6] = [0.26, 0.25, -0.05, 0.9965, 0.08, 1.0768];
 
@@ -527,6 +837,110 @@ mod tests {
             let t = rec.t[k];
             let want = 0.5 / THETA[3] * (t - tau * (1.0 - (-t / tau).exp()));
             approx::assert_abs_diff_eq!(*vk, want, epsilon = 1e-6);
+        }
+    }
+
+    #[test]
+    fn analytic_sensitivities_match_central_differences_with_every_candidate() {
+        // A rich command with a start at speed (the holding command matters before the first
+        // delayed sample and where the rate limit starts).
+        let x0 = [0.15, 0.3];
+        let cases: Vec<(Vec<Candidate>, Vec<f64>)> = vec![
+            (vec![], vec![]),
+            (vec![Candidate::InputDelay], vec![0.23]),
+            (vec![Candidate::VelocitySaturation], vec![0.35, 0.6]),
+            (vec![Candidate::AccelerationLimit], vec![0.8, 2.0]),
+            (vec![Candidate::CoulombFriction], vec![0.02, 0.05]),
+            (vec![Candidate::WheelAsymmetry], vec![1.1]),
+            (
+                vec![Candidate::PayloadChange],
+                vec![3.3, 0.3, 0.3, -0.04, 0.1],
+            ),
+            (vec![Candidate::GainDrift], vec![0.01]),
+            (vec![Candidate::Slip], vec![0.05, 0.1]),
+            (
+                vec![
+                    Candidate::InputDelay,
+                    Candidate::AccelerationLimit,
+                    Candidate::VelocitySaturation,
+                ],
+                vec![0.17, 0.8, 2.0, 0.35, 0.6],
+            ),
+        ];
+        for avg in [false, true] {
+            let rec = recording(avg, 80, |x| {
+                (
+                    0.3 + 0.25 * (1.3 * x).sin() + 0.1 * (3.1 * x).cos(),
+                    0.8 * (0.7 * x).cos() - 0.3 * (2.3 * x).sin(),
+                )
+            });
+            for (cands, extra) in &cases {
+                let e = Extended::new(cands, 0.34).expect("model");
+                let mut th = THETA.to_vec();
+                th.extend_from_slice(extra);
+                let (y, sens) = e
+                    .simulate_with_sensitivities(&th, &rec, &x0)
+                    .expect("simulates")
+                    .expect("has sensitivities");
+                let plain = e.simulate(&th, &rec, &x0).expect("simulates");
+                for c in 0..2 {
+                    assert_eq!(
+                        y[c], plain[c],
+                        "{cands:?}: the pass's outputs are the simulation's"
+                    );
+                }
+                let central = |j: usize| -> Vec<Vec<f64>> {
+                    let (mut up, mut dn) = (th.clone(), th.clone());
+                    let (mut xu, mut xd) = (x0.to_vec(), x0.to_vec());
+                    let h = 1e-6
+                        * if j < th.len() {
+                            th[j].abs().max(1e-2)
+                        } else {
+                            1.0
+                        };
+                    if j < th.len() {
+                        up[j] += h;
+                        dn[j] -= h;
+                    } else {
+                        xu[j - th.len()] += h;
+                        xd[j - th.len()] -= h;
+                    }
+                    let a = e.simulate(&up, &rec, &xu).expect("simulates");
+                    let b = e.simulate(&dn, &rec, &xd).expect("simulates");
+                    (0..2)
+                        .map(|c| {
+                            a[c].iter()
+                                .zip(&b[c])
+                                .map(|(p, q)| (p - q) / (2.0 * h))
+                                .collect()
+                        })
+                        .collect()
+                };
+                // θ1…θ6 and the initial state (the candidates' columns are differences already).
+                for j in (0..6).chain(th.len()..th.len() + 2) {
+                    let want = central(j);
+                    for c in 0..2 {
+                        let got: Vec<f64> = if j < th.len() {
+                            sens.theta[c].column(j).iter().copied().collect()
+                        } else {
+                            sens.initial[c]
+                                .column(j - th.len())
+                                .iter()
+                                .copied()
+                                .collect()
+                        };
+                        let scale = want[c].iter().fold(0.0f64, |a, x| a.max(x.abs()));
+                        let err = got
+                            .iter()
+                            .zip(&want[c])
+                            .fold(0.0f64, |a, (g, w)| a.max((g - w).abs()));
+                        assert!(
+                            err <= 1e-5 * scale + 1e-9,
+                            "{cands:?} avg={avg} column {j} channel {c}: error {err:.3e} of {scale:.3e}"
+                        );
+                    }
+                }
+            }
         }
     }
 }

@@ -47,7 +47,9 @@ use std::time::Instant;
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, TerminationReason};
 use nalgebra::{DMatrix, DVector};
 use nalgebra034 as na;
-use wheelid_core::{BoundState, DynamicModel, LinearProblem, Recording, SolveError, SolveStatus};
+use wheelid_core::{
+    BoundState, DynamicModel, LinearProblem, Recording, Simulation, SolveError, SolveStatus,
+};
 
 use crate::ols;
 
@@ -195,8 +197,11 @@ struct Problem<'a, M: ?Sized> {
     /// Initial states when they are not estimated.
     fixed_initial: Option<Vec<Vec<f64>>>,
     u: na::DVector<f64>,
-    /// Offsets of each recording's rows.
+    /// Offsets of each recording's rows (its samples in the cost, both channels).
     offsets: Vec<usize>,
+    /// Per recording, the samples that enter the cost (the mask's), in time order: row
+    /// `offsets[r] + i·s + c` is sample `index[r][i]`, channel c.
+    index: Vec<Vec<usize>>,
     /// Per recording, whether each sample enters the cost.
     mask: Vec<Vec<bool>>,
     /// Forward instead of central differences.
@@ -204,6 +209,9 @@ struct Problem<'a, M: ?Sized> {
     rows: usize,
     /// The last weighted Jacobian in (θ, x0) and the u it was taken at.
     last_jacobian: RefCell<Option<(na::DVector<f64>, DMatrix<f64>)>>,
+    /// The simulations of the last residual evaluation and the u they were run at: the base of
+    /// the next forward-difference Jacobian, which Levenberg–Marquardt asks for at that u.
+    last_simulation: RefCell<Option<(na::DVector<f64>, Vec<Simulation>)>>,
 }
 
 /// One central-difference column: parameter index, step, outputs at +step and −step.
@@ -245,6 +253,7 @@ impl<M: DynamicModel + ?Sized> Problem<'_, M> {
     /// or diverged.
     fn raw_residuals(&self, theta: &[f64], u: &na::DVector<f64>) -> Option<Vec<Vec<Vec<f64>>>> {
         let mut out = Vec::with_capacity(self.recs.len());
+        let mut sims = Vec::with_capacity(self.recs.len());
         for (r, rec) in self.recs.iter().enumerate() {
             let sim = self
                 .model
@@ -259,6 +268,10 @@ impl<M: DynamicModel + ?Sized> Problem<'_, M> {
                 per.push(meas[c].iter().zip(y).map(|(m, s)| m - s).collect());
             }
             out.push(per);
+            sims.push(sim);
+        }
+        if self.forward {
+            self.last_simulation.replace(Some((u.clone(), sims)));
         }
         Some(out)
     }
@@ -268,6 +281,7 @@ impl<M: DynamicModel + ?Sized> Problem<'_, M> {
         theta: &[f64],
         x0: &[f64],
         rec: &Recording,
+        cached: Option<Simulation>,
     ) -> Option<Vec<DMatrix<f64>>> {
         let (p, s, n) = (self.p(), self.nch(), rec.len());
         if let Ok(Some((_, sens))) = self.model.simulate_with_sensitivities(theta, rec, x0) {
@@ -285,10 +299,10 @@ impl<M: DynamicModel + ?Sized> Problem<'_, M> {
         // Central differences, step ~ 1e-5 relative (above the integrator's sub-step jitter),
         // the columns shared out over the available cores.
         let scale = theta.iter().fold(0.0f64, |a, x| a.max(x.abs())).max(1e-12);
-        let base_sim = if self.forward {
-            Some(self.model.simulate(theta, rec, x0).ok()?)
-        } else {
-            None
+        let base_sim = match (self.forward, cached) {
+            (true, Some(sim)) => Some(sim),
+            (true, None) => Some(self.model.simulate(theta, rec, x0).ok()?),
+            (false, _) => None,
         };
         let column = |j: usize| -> Option<FdColumn> {
             let mut th = theta.to_vec();
@@ -353,11 +367,15 @@ impl<M: DynamicModel + ?Sized> Problem<'_, M> {
             .map_or(s * self.recs.len(), |_| 0);
         let theta = self.theta_of(u);
         let mut jac = DMatrix::zeros(self.rows, cols);
+        let mut cached = match self.last_simulation.take() {
+            Some((at, sims)) if at == *u => sims.into_iter().map(Some).collect(),
+            _ => vec![None; self.recs.len()],
+        };
         for (r, rec) in self.recs.iter().enumerate() {
-            let sens = self.sensitivities(&theta, &self.initial_of(u, r), rec)?;
+            let sens = self.sensitivities(&theta, &self.initial_of(u, r), rec, cached[r].take())?;
             for (c, (sc, &w)) in sens.iter().zip(&self.weight).enumerate() {
-                for k in (0..rec.len()).filter(|&k| self.mask[r][k]) {
-                    let row = self.offsets[r] + k * s + c;
+                for (i, &k) in self.index[r].iter().enumerate() {
+                    let row = self.offsets[r] + i * s + c;
                     for j in 0..p {
                         jac[(row, j)] = -w * sc[(k, j)];
                     }
@@ -400,8 +418,8 @@ impl<M: DynamicModel + ?Sized> LeastSquaresProblem<f64, na::Dyn, na::Dyn> for Pr
         let mut out = na::DVector::zeros(self.rows);
         for (r, per) in raw.iter().enumerate() {
             for (c, e) in per.iter().enumerate() {
-                for (k, x) in e.iter().enumerate().filter(|(k, _)| self.mask[r][*k]) {
-                    out[self.offsets[r] + k * s + c] = self.weight[c] * x;
+                for (i, &k) in self.index[r].iter().enumerate() {
+                    out[self.offsets[r] + i * s + c] = self.weight[c] * e[k];
                 }
             }
         }
@@ -501,14 +519,18 @@ impl OutputError {
             }
             None => recordings.iter().map(|r| vec![true; r.len()]).collect(),
         };
+        // Only the residuals that count are rows of the problem.
+        let index: Vec<Vec<usize>> = mask
+            .iter()
+            .map(|m| (0..m.len()).filter(|&k| m[k]).collect())
+            .collect();
         let mut offsets = Vec::with_capacity(recordings.len());
         let mut rows = 0;
-        for rec in recordings {
+        for ix in &index {
             offsets.push(rows);
-            rows += rec.len() * s;
+            rows += ix.len() * s;
         }
-        // Residuals that count: the masked-out rows stay in place as zeros.
-        let active = s * mask.iter().flatten().filter(|&&b| b).count();
+        let active = rows;
         if active <= unknowns {
             return Err(SolveError::InvalidProblem(format!(
                 "{active} residuals cannot determine {unknowns} unknowns"
@@ -530,10 +552,12 @@ impl OutputError {
             fixed_initial: (!self.estimate_initial).then(|| first.clone()),
             u: na::DVector::from_vec(u0),
             offsets,
+            index,
             mask,
             forward: self.forward_differences,
             rows,
             last_jacobian: RefCell::new(None),
+            last_simulation: RefCell::new(None),
         };
         let lm = LevenbergMarquardt::new()
             .with_ftol(self.tolerance)
@@ -604,8 +628,8 @@ impl OutputError {
         let mut e = DVector::zeros(rows);
         for (r, per) in raw.iter().enumerate() {
             for (c, ec) in per.iter().enumerate() {
-                for (k, x) in ec.iter().enumerate().filter(|(k, _)| problem.mask[r][*k]) {
-                    e[problem.offsets[r] + k * s + c] = problem.weight[c] * x;
+                for (i, &k) in problem.index[r].iter().enumerate() {
+                    e[problem.offsets[r] + i * s + c] = problem.weight[c] * ec[k];
                 }
             }
         }
@@ -642,12 +666,20 @@ impl OutputError {
             correlation_lags: 0,
         };
         let d = ols::decompose(&lp, 1e-12)?;
-        let spans: Vec<(usize, usize)> = problem
-            .offsets
-            .iter()
-            .zip(recordings)
-            .map(|(&o, r)| (o, r.len()))
-            .collect();
+        // Runs of consecutive samples: the lags of the long-run covariance stay inside them.
+        let mut spans: Vec<(usize, usize)> = Vec::new();
+        for (&o, ix) in problem.offsets.iter().zip(&problem.index) {
+            for (i, &k) in ix.iter().enumerate() {
+                match spans.last_mut() {
+                    Some((start, n))
+                        if i > 0 && ix[i - 1] + 1 == k && *start + *n * s == o + i * s =>
+                    {
+                        *n += 1
+                    }
+                    _ => spans.push((o + i * s, 1)),
+                }
+            }
+        }
         let full = sandwich(&d, &jac_free, &e, &spans, s, lags, active);
         let mut covariance = DMatrix::zeros(p, p);
         for (a, &i) in keep.iter().enumerate().filter(|(_, i)| **i < p) {

@@ -51,7 +51,7 @@ use wheelid_core::condition::{self, ConditionSettings};
 use wheelid_core::residual::holm;
 use wheelid_core::{
     ChannelInfo, DynamicModel, ParamInfo, Recording, RegressorModel, Result as CoreResult,
-    Simulation, metrics,
+    Sensitivities, Simulation, metrics,
 };
 use wheelid_models::{Candidate, Extended};
 use wheelid_solvers::{Ols, OutputError, OutputErrorFit};
@@ -340,6 +340,16 @@ impl DynamicModel for Pinned<'_> {
     }
     fn simulate(&self, theta: &[f64], rec: &Recording, initial: &[f64]) -> CoreResult<Simulation> {
         self.inner.simulate(&self.expand(theta), rec, initial)
+    }
+    fn simulate_with_sensitivities(
+        &self,
+        theta: &[f64],
+        rec: &Recording,
+        initial: &[f64],
+    ) -> CoreResult<Option<(Simulation, Sensitivities)>> {
+        self.inner
+            .sensitivities_of(&self.expand(theta), rec, initial, &self.free)
+            .map(Some)
     }
 }
 
@@ -755,10 +765,10 @@ fn patterns(c: Candidate, data: &Data, cur: &Current) -> Option<Vec<Pattern>> {
             Some(out)
         }
         Candidate::PayloadChange => {
-            // A grid of change times over the middle of the run.
+            // A grid of change times over the middle of the run, one thread per time (the
+            // longest fingerprint: four simulations each).
             let grid = 5;
-            let mut out = Vec::new();
-            for g in 1..=grid {
+            let pattern_at = |g: usize| {
                 let ts = t_lo + (t_hi - t_lo) * g as f64 / (grid + 1) as f64;
                 let mut vals = null.clone();
                 vals[0] = ts;
@@ -772,9 +782,20 @@ fn patterns(c: Candidate, data: &Data, cur: &Current) -> Option<Vec<Pattern>> {
                 );
                 p.guess = vals;
                 p.grid = grid;
-                out.push(p);
-            }
-            Some(out)
+                Some(p)
+            };
+            std::thread::scope(|scope| {
+                let handles: Vec<_> = (1..=grid)
+                    .map(|g| {
+                        let pattern_at = &pattern_at;
+                        scope.spawn(move || pattern_at(g))
+                    })
+                    .collect();
+                handles
+                    .into_iter()
+                    .map(|h| h.join().ok().flatten())
+                    .collect::<Option<Vec<_>>>()
+            })
         }
     }
 }

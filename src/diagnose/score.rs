@@ -108,9 +108,9 @@ pub(crate) fn difference(a: &Outputs, b: &Outputs, h: f64) -> Outputs {
         .collect()
 }
 
-/// Forward-difference Jacobian of the weighted training outputs with respect to θ and each
-/// recording's initial state (columns: θ, then (v0, ω0) per recording); `None` if a perturbed
-/// simulation fails.
+/// Jacobian of the weighted training outputs with respect to θ and each recording's initial
+/// state (columns: θ, then (v0, ω0) per recording): the model's sensitivities, or forward
+/// differences of its simulation if it has none; `None` if a simulation fails.
 pub(crate) fn jacobian(
     model: &dyn DynamicModel,
     theta: &[f64],
@@ -121,6 +121,42 @@ pub(crate) fn jacobian(
     let p = theta.len();
     let nrec = frame.recs.len();
     let mut cols: Vec<DVector<f64>> = Vec::with_capacity(p + 2 * nrec);
+    // The model's own sensitivities where it has them.
+    let mut sens = Vec::with_capacity(nrec);
+    for (rec, x0) in frame.recs.iter().zip(initial) {
+        match model.simulate_with_sensitivities(theta, rec, x0) {
+            Ok(Some((_, s))) => sens.push(s),
+            Ok(None) => break,
+            Err(_) => return None,
+        }
+    }
+    if sens.len() == nrec {
+        let zeros = || -> Outputs {
+            frame
+                .recs
+                .iter()
+                .map(|rec| [vec![0.0; rec.len()], vec![0.0; rec.len()]])
+                .collect()
+        };
+        for j in 0..p {
+            let d: Outputs = sens
+                .iter()
+                .map(|s| [0, 1].map(|c| s.theta[c].column(j).iter().copied().collect()))
+                .collect();
+            cols.push(frame.flatten(&d));
+        }
+        for (r, s) in sens.iter().enumerate() {
+            for i in 0..2 {
+                let mut d = zeros();
+                for c in 0..2 {
+                    d[r][c] = s.initial[c].column(i).iter().copied().collect();
+                }
+                cols.push(frame.flatten(&d));
+            }
+        }
+        let j = DMatrix::from_columns(&cols);
+        return j.iter().all(|x| x.is_finite()).then_some(j);
+    }
     for j in 0..p {
         let h = 1e-6 * theta[j].abs().max(1e-3);
         let mut th = theta.to_vec();
@@ -211,33 +247,41 @@ pub(crate) fn score(
     let mut g_total = DVector::zeros(k);
     for span in spans {
         let n = span.len() / 2;
-        let g = DMatrix::from_fn(n, k, |t, j| {
-            let r = span.start + 2 * t;
-            sp[(r, j)] * e[r] + sp[(r + 1, j)] * e[r + 1]
-        });
+        // Per-instant scores g_t (row-major n × k), and their running sums (n + 1 rows).
+        let mut pre = vec![0.0; (n + 1) * k];
         for t in 0..n {
-            g_total += g.row(t).transpose();
+            let r = span.start + 2 * t;
+            for j in 0..k {
+                let g = sp[(r, j)] * e[r] + sp[(r + 1, j)] * e[r + 1];
+                pre[(t + 1) * k + j] = pre[t * k + j] + g;
+            }
+        }
+        for j in 0..k {
+            g_total[j] += pre[n * k + j];
         }
         // Overlapping batch means over windows of m = L + 1 instants: the Bartlett-kernel
         // estimate of Var(Σ g_k) up to edge terms, in O(n k²) instead of O(n L k²).
-        let m = lags + 1;
-        if n > m {
-            let mut pre = DMatrix::<f64>::zeros(n + 1, k);
-            for t in 0..n {
-                for j in 0..k {
-                    pre[(t + 1, j)] = pre[(t, j)] + g[(t, j)];
+        // (A span no longer than L + 1 instants: the plain sum of outer products, m = 1.)
+        let m = if n > lags + 1 { lags + 1 } else { 1 };
+        let windows = (n + 1).saturating_sub(m);
+        let mut acc = DMatrix::<f64>::zeros(k, k);
+        let mut b = vec![0.0; k];
+        for t in 0..windows {
+            for (j, bj) in b.iter_mut().enumerate() {
+                *bj = pre[(t + m) * k + j] - pre[t * k + j];
+            }
+            for i in 0..k {
+                for j in 0..=i {
+                    acc[(i, j)] += b[i] * b[j];
                 }
             }
-            let windows = n - m + 1;
-            let mut acc = DMatrix::<f64>::zeros(k, k);
-            for t in 0..windows {
-                let b = pre.row(t + m) - pre.row(t);
-                acc += b.transpose() * b;
-            }
-            meat += acc * (n as f64 / (windows as f64 * m as f64));
-        } else {
-            meat += g.transpose() * &g;
         }
+        for i in 0..k {
+            for j in 0..i {
+                acc[(j, i)] = acc[(i, j)];
+            }
+        }
+        meat += acc * (n as f64 / (windows.max(1) as f64 * m as f64));
     }
     let meat_inv = meat.clone().pseudo_inverse(1e-12 * meat.max().abs()).ok()?;
     let stat = (g_total.transpose() * &meat_inv * &g_total)[(0, 0)].max(0.0);
