@@ -140,7 +140,6 @@ pub fn check_theta(theta: &[f64]) -> Result<[f64; 6]> {
 }
 
 /// What both simulations check and read first.
-#[derive(Clone, Copy)]
 struct Setup {
     th: [f64; 6],
     v0: f64,
@@ -220,21 +219,12 @@ pub fn simulate(theta: &[f64], rec: &Recording, initial: &[f64]) -> Result<[Vec<
 
 /// Number of sensitivity columns: θ1…θ6, then v0, ω0.
 const NS: usize = 8;
-/// Columns per pass: the eight are integrated in two passes of four, on two threads.
-const HALF: usize = NS / 2;
-/// Augmented state of a pass: v, ω, then S row-major (∂v/∂p, ∂ω/∂p) for its four columns.
-const NZ: usize = 2 + 2 * HALF;
+/// Augmented state: v, ω, then S row-major (∂v/∂p, ∂ω/∂p).
+const NZ: usize = 2 + 2 * NS;
 
-/// Derivative of the augmented state z = (v, ω, S) for commands u, S holding the columns
-/// `cols` of p = (θ1…θ6, v0, ω0).
+/// Derivative of the augmented state z = (v, ω, S) for commands u.
 #[inline]
-fn augmented_rhs(
-    theta: &[f64; 6],
-    inv: [f64; 2],
-    cols: &[usize; HALF],
-    z: &[f64; NZ],
-    u: (f64, f64),
-) -> [f64; NZ] {
+fn augmented_rhs(theta: &[f64; 6], inv: [f64; 2], z: &[f64; NZ], u: (f64, f64)) -> [f64; NZ] {
     let [_, _, t3, t4, t5, t6] = *theta;
     let [i1, i2] = inv;
     let (v, w) = (z[0], z[1]);
@@ -249,31 +239,31 @@ fn augmented_rhs(
     let mut out = [0.0; NZ];
     out[0] = dv;
     out[1] = dw;
-    for (j, &col) in cols.iter().enumerate() {
-        let (sv, sw) = (z[2 + j], z[2 + HALF + j]);
+    for j in 0..NS {
+        let (sv, sw) = (z[2 + j], z[2 + NS + j]);
         out[2 + j] = a[0][0] * sv + a[0][1] * sw;
-        out[2 + HALF + j] = a[1][0] * sv + a[1][1] * sw;
-        // B = ∂f/∂θ (module doc); the initial state has no source.
-        match col {
-            0 => out[2 + j] -= dv * i1,
-            1 => out[2 + HALF + j] -= dw * i2,
-            2 => out[2 + j] += w * w * i1,
-            3 => out[2 + j] -= v * i1,
-            4 => out[2 + HALF + j] -= v * w * i2,
-            5 => out[2 + HALF + j] -= w * i2,
-            _ => {}
-        }
+        out[2 + NS + j] = a[1][0] * sv + a[1][1] * sw;
     }
+    out[2] += -dv * i1;
+    out[2 + 2] += w * w * i1;
+    out[2 + 3] += -v * i1;
+    out[2 + NS + 1] += -dw * i2;
+    out[2 + NS + 4] += -v * w * i2;
+    out[2 + NS + 5] += -w * i2;
     out
 }
 
-/// One pass of [`simulate_with_sensitivities`]: the outputs and the sensitivities to the
-/// columns `cols` of (θ1…θ6, v0, ω0), per channel n × 4.
-fn sensitivity_pass(
-    setup: &Setup,
+/// Free-run simulation as [`simulate`], with the output sensitivities to θ (n × 6 per channel)
+/// and to the initial state (n × 2 per channel), from the forward sensitivity equations in the
+/// module doc, integrated by the same RK4 sub-steps.
+///
+/// # Errors
+/// As [`simulate`].
+pub fn simulate_with_sensitivities(
+    theta: &[f64],
     rec: &Recording,
-    cols: [usize; HALF],
-) -> ([Vec<f64>; 2], [DMatrix<f64>; 2]) {
+    initial: &[f64],
+) -> Result<([Vec<f64>; 2], Sensitivities)> {
     let Setup {
         th,
         v0,
@@ -281,20 +271,15 @@ fn sensitivity_pass(
         n,
         hold,
         avg,
-    } = *setup;
+    } = setup(theta, rec, initial)?;
     let h_max = substep(&th);
     let mut z = [0.0; NZ];
     z[0] = v0;
     z[1] = w0;
-    for (j, &col) in cols.iter().enumerate() {
-        match col {
-            6 => z[2 + j] = 1.0,        // ∂v/∂v0
-            7 => z[2 + HALF + j] = 1.0, // ∂ω/∂ω0
-            _ => {}
-        }
-    }
+    z[2 + 6] = 1.0; // ∂v/∂v0
+    z[2 + NS + 7] = 1.0; // ∂ω/∂ω0
     let mut y = [Vec::with_capacity(n), Vec::with_capacity(n)];
-    let mut sens = [DMatrix::zeros(n, HALF), DMatrix::zeros(n, HALF)];
+    let mut sens = [DMatrix::zeros(n, NS), DMatrix::zeros(n, NS)];
     let store = |k: usize,
                  x: &[f64; NZ],
                  scale: f64,
@@ -302,14 +287,14 @@ fn sensitivity_pass(
                  sens: &mut [DMatrix<f64>; 2]| {
         for ch in 0..2 {
             y[ch].push(x[ch] * scale);
-            for j in 0..HALF {
-                sens[ch][(k, j)] = x[2 + ch * HALF + j] * scale;
+            for j in 0..NS {
+                sens[ch][(k, j)] = x[2 + ch * NS + j] * scale;
             }
         }
     };
     store(0, &z, 1.0, &mut y, &mut sens);
     let inv = [1.0 / th[0], 1.0 / th[1]];
-    let f = |z: &[f64; NZ], u: (f64, f64)| augmented_rhs(&th, inv, &cols, z, u);
+    let f = |z: &[f64; NZ], u: (f64, f64)| augmented_rhs(&th, inv, z, u);
     for k in 1..n {
         let mut q = [0.0; NZ];
         let span = for_each_substep(rec, k, hold, h_max, |u0, u1, h| {
@@ -321,54 +306,10 @@ fn sensitivity_pass(
             store(k, &z, 1.0, &mut y, &mut sens);
         }
     }
-    (y, sens)
-}
-
-/// Free-run simulation as [`simulate`], with the output sensitivities to θ (n × 6 per channel)
-/// and to the initial state (n × 2 per channel), from the forward sensitivity equations in the
-/// module doc, integrated by the same RK4 sub-steps — in two passes of four columns, on two
-/// threads.
-///
-/// # Errors
-/// As [`simulate`].
-pub fn simulate_with_sensitivities(
-    theta: &[f64],
-    rec: &Recording,
-    initial: &[f64],
-) -> Result<([Vec<f64>; 2], Sensitivities)> {
-    let setup = setup(theta, rec, initial)?;
-    let n = setup.n;
-    let ((y, first), second) = std::thread::scope(|scope| {
-        let other = scope.spawn(|| sensitivity_pass(&setup, rec, [4, 5, 6, 7]));
-        let mine = sensitivity_pass(&setup, rec, [0, 1, 2, 3]);
-        (mine, other.join())
-    });
-    let (_, second) =
-        second.map_err(|_| Error::InvalidSetting("the sensitivity pass panicked".into()))?;
-    // Columns 0–3 from the first pass, 4–7 from the second.
-    let col = |c: usize, j: usize| {
-        if j < HALF {
-            first[c].column(j)
-        } else {
-            second[c].column(j - HALF)
-        }
-    };
-    let theta_sens = [0, 1].map(|c| {
-        let mut m = DMatrix::zeros(n, 6);
-        for j in 0..6 {
-            m.set_column(j, &col(c, j));
-        }
-        m
-    });
-    let initial_sens = [0, 1].map(|c| {
-        let mut m = DMatrix::zeros(n, 2);
-        for i in 0..2 {
-            m.set_column(i, &col(c, 6 + i));
-        }
-        m
-    });
-    let [tv, tw] = theta_sens;
-    let [iv, iw] = initial_sens;
+    let [sv, sw] = sens;
+    let split = |s: DMatrix<f64>| (s.columns(0, 6).into_owned(), s.columns(6, 2).into_owned());
+    let (tv, iv) = split(sv);
+    let (tw, iw) = split(sw);
     Ok((
         y,
         Sensitivities {

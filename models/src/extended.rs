@@ -358,14 +358,11 @@ impl DynamicModel for Extended {
 
 /// Sensitivity columns integrated analytically: θ1…θ6, v0, ω0.
 const NS: usize = 8;
-/// Columns per sensitivity pass: the eight are integrated in two passes of four, on two
-/// threads (each a state of 2 + 2·4).
-const HALF: usize = NS / 2;
-/// The augmented state of a sensitivity pass: v, ω, ∂v/∂p, ∂ω/∂p for its four columns.
-const NZ: usize = 2 + 2 * HALF;
+/// The augmented state of the sensitivity pass: v, ω, ∂v/∂p, ∂ω/∂p.
+const NZ: usize = 2 + 2 * NS;
 
 /// A command (v, ω setpoints after the pipeline) and its sensitivities to (θ1…θ6, v0, ω0):
-/// `M` = 0 in a plain simulation, [`HALF`] in a sensitivity pass.
+/// `M` = 0 in a plain simulation, [`NS`] in the sensitivity pass.
 /// `live` is false while `du` is zero (almost always: the command depends on (θ, x0) only before
 /// the first delayed command and while a rate limit slews from the holding command), so that
 /// the pass skips it.
@@ -451,15 +448,8 @@ impl Extended {
                     })
                 })
                 .collect();
-            let second =
-                scope.spawn(|| self.integrate::<NZ, HALF>(&th0, &ph, rec, initial, [4, 5, 6, 7]));
-            let first = self.integrate::<NZ, HALF>(&th0, &ph, rec, initial, [0, 1, 2, 3]);
-            let z = first.and_then(|a| {
-                let b = second.join().unwrap_or_else(|_| {
-                    Err(Error::InvalidSetting("a simulation panicked".into()))
-                })?;
-                Ok((a, b))
-            });
+            let all = std::array::from_fn(|j| j);
+            let z = self.integrate::<NZ, NS>(&th0, &ph, rec, initial, all);
             let fd: Vec<Result<[Vec<f64>; 2]>> = handles
                 .into_iter()
                 .map(|h| {
@@ -470,12 +460,9 @@ impl Extended {
                 .collect();
             (z, fd)
         });
-        let (za, zb) = z?;
+        let za = z?;
         // Column j of (θ1…θ6, v0, ω0), channel c.
-        let col = |c: usize, j: usize| {
-            let (z, a) = if j < HALF { (&za, j) } else { (&zb, j - HALF) };
-            &z[2 + c * HALF + a]
-        };
+        let col = |c: usize, j: usize| &za[2 + c * NS + j];
         let z = &za;
         let n = rec.len();
         let mut fd = fd.into_iter();
@@ -517,7 +504,7 @@ impl Extended {
     }
 
     /// The simulation of the module doc on the recording's samples: with `N` = 2, `M` = 0 the
-    /// outputs (v̂, ω̂); with `N` = [`NZ`], `M` = [`HALF`] also their sensitivities to the
+    /// outputs (v̂, ω̂); with `N` = [`NZ`], `M` = [`NS`] also their sensitivities to the
     /// parameters `cols` of (θ1…θ6, v0, ω0) (channels 2 + c·M + a: ∂ŷ_c/∂p_cols[a]).
     fn integrate<const N: usize, const M: usize>(
         &self,
