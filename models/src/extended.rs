@@ -472,9 +472,9 @@ impl Extended {
         ];
         for (a, &j) in columns.iter().enumerate() {
             if j < 6 {
-                for c in 0..2 {
+                for (c, m) in sens_theta.iter_mut().enumerate() {
                     for (k, x) in col(c, j).iter().enumerate() {
-                        sens_theta[c][(k, a)] = *x;
+                        m[(k, a)] = *x;
                     }
                 }
             } else {
@@ -566,9 +566,9 @@ impl Extended {
         let target = |c: Cmd<M>| match ph.sat {
             Some(lim) => {
                 let mut out = c;
-                for k in 0..2 {
-                    if c.u[k].abs() > lim[k] {
-                        out.u[k] = c.u[k].clamp(-lim[k], lim[k]);
+                for (k, &l) in lim.iter().enumerate() {
+                    if c.u[k].abs() > l {
+                        out.u[k] = c.u[k].clamp(-l, l);
                         out.du[k] = [0.0; M];
                     }
                 }
@@ -710,8 +710,8 @@ impl Extended {
                 let s1 = match ph.accel {
                     Some(a) => {
                         let mut s1 = tgt;
-                        for k in 0..2 {
-                            let step = a[k] * h;
+                        for (k, &rate) in a.iter().enumerate() {
+                            let step = rate * h;
                             s1.u[k] = s0.u[k] + (tgt.u[k] - s0.u[k]).clamp(-step, step);
                             // Slewing, the setpoint keeps its own sensitivity.
                             if (tgt.u[k] - s0.u[k]).abs() > step {
@@ -906,7 +906,7 @@ mod tests {
                 // θ1…θ6 and the initial state (the candidates' columns are differences already).
                 for j in (0..6).chain(th.len()..th.len() + 2) {
                     let want = central(j);
-                    for c in 0..2 {
+                    for (c, want_c) in want.iter().enumerate() {
                         let got: Vec<f64> = if j < th.len() {
                             sens.theta[c].column(j).iter().copied().collect()
                         } else {
@@ -916,10 +916,10 @@ mod tests {
                                 .copied()
                                 .collect()
                         };
-                        let scale = want[c].iter().fold(0.0f64, |a, x| a.max(x.abs()));
+                        let scale = want_c.iter().fold(0.0f64, |a, x| a.max(x.abs()));
                         let err = got
                             .iter()
-                            .zip(&want[c])
+                            .zip(want_c)
                             .fold(0.0f64, |a, (g, w)| a.max((g - w).abs()));
                         assert!(
                             err <= 1e-5 * scale + 1e-9,

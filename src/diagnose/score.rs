@@ -148,9 +148,7 @@ pub(crate) fn jacobian(
         for (r, s) in sens.iter().enumerate() {
             for i in 0..2 {
                 let mut d = zeros();
-                for c in 0..2 {
-                    d[r][c] = s.initial[c].column(i).iter().copied().collect();
-                }
+                d[r] = [0, 1].map(|c| s.initial[c].column(i).iter().copied().collect());
                 cols.push(frame.flatten(&d));
             }
         }
