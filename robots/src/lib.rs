@@ -10,6 +10,7 @@ pub mod control;
 pub mod effects;
 pub mod excitation;
 pub mod khepera;
+pub mod link;
 pub mod pioneer;
 pub mod profile;
 pub mod replay;

@@ -375,7 +375,7 @@ fn a_closed_port_is_an_io_error_naming_the_address() {
     match Khepera::connect(&settings).expect_err("no device") {
         RobotError::Io { what, .. } => assert_eq!(
             what,
-            "/dev/wheelid-no-such-khepera: opening the serial port at 115200 Bd"
+            "/dev/wheelid-no-such-khepera: opening the serial port at 115200 baud"
         ),
         other => panic!("expected an I/O error, got {other:?}"),
     }

@@ -1,7 +1,6 @@
 //! The client: a [`Robot`] that drives a Khepera III over a serial line or a TCP–serial bridge.
 
 use std::io::{self, Read, Write};
-use std::net::{TcpStream, ToSocketAddrs};
 use std::time::{Duration, Instant};
 
 use wheelid_core::{Odometry, Pose, Robot, RobotError};
@@ -27,40 +26,12 @@ impl<T: Read + Write + Send + ?Sized> Link for T {}
 /// [`RobotError::Io`] naming the port.
 fn open_link(settings: &KheperaSettings) -> Result<Box<dyn Link>, RobotError> {
     let timeout = Duration::from_secs_f64(settings.timeout_s);
-    let port = &settings.port;
-    if let Some(address) = port.strip_prefix("tcp://") {
-        let what = |op: &str| format!("{port}: {op}");
-        let addrs: Vec<_> = address
-            .to_socket_addrs()
-            .map_err(|e| RobotError::io(what("resolving the address"), e))?
-            .collect();
-        let mut last = io::Error::new(io::ErrorKind::NotFound, "the address resolves to nothing");
-        for addr in addrs {
-            match TcpStream::connect_timeout(&addr, timeout) {
-                Ok(stream) => {
-                    let setup = stream
-                        .set_read_timeout(Some(timeout))
-                        .and_then(|()| stream.set_write_timeout(Some(timeout)))
-                        .and_then(|()| stream.set_nodelay(true));
-                    setup.map_err(|e| RobotError::io(what("configuring the socket"), e))?;
-                    return Ok(Box::new(stream));
-                }
-                Err(e) => last = e,
-            }
-        }
-        Err(RobotError::io(what("connecting"), last))
-    } else {
-        let serial = serialport::new(port.as_str(), settings.baud)
-            .timeout(timeout)
-            .open()
-            .map_err(|e| {
-                RobotError::io(
-                    format!("{port}: opening the serial port at {} Bd", settings.baud),
-                    e.into(),
-                )
-            })?;
-        Ok(Box::new(serial))
-    }
+    Ok(
+        match crate::link::open(&settings.port, settings.baud, timeout)? {
+            crate::link::Port::Tcp(s) => Box::new(s),
+            crate::link::Port::Serial(s) => Box::new(s),
+        },
+    )
 }
 
 /// A line-oriented request–answer channel over a [`Link`].

@@ -2,7 +2,7 @@
 //! [`ArcosServer`](super::ArcosServer)) through the [`Robot`] trait.
 
 use std::io::{self, Read, Write};
-use std::net::{TcpStream, ToSocketAddrs};
+use std::net::TcpStream;
 use std::time::{Duration, Instant};
 
 use serde::{Deserialize, Serialize};
@@ -135,39 +135,12 @@ impl Link for Box<dyn serialport::SerialPort> {
 
 /// Opens `port` (`tcp://host:port` or a serial device path).
 fn open_link(settings: &PioneerSettings) -> Result<Box<dyn Link>, RobotError> {
-    let port = settings.port.trim();
-    let timeout = settings.timeout();
-    if let Some(address) = port.strip_prefix("tcp://") {
-        let what = format!("{port}: connecting");
-        let addrs = address
-            .to_socket_addrs()
-            .map_err(|e| RobotError::io(&what, e))?;
-        let mut last = io::Error::new(io::ErrorKind::NotFound, "the address resolves to nothing");
-        for addr in addrs {
-            match TcpStream::connect_timeout(&addr, timeout) {
-                Ok(stream) => {
-                    // One small packet per command and per SIP: never wait to coalesce them.
-                    stream
-                        .set_nodelay(true)
-                        .map_err(|e| RobotError::io(&what, e))?;
-                    return Ok(Box::new(stream));
-                }
-                Err(e) => last = e,
-            }
-        }
-        Err(RobotError::io(what, last))
-    } else {
-        let serial = serialport::new(port, settings.baud)
-            .timeout(timeout)
-            .open()
-            .map_err(|e| {
-                RobotError::io(
-                    format!("{port}: opening the serial port at {} baud", settings.baud),
-                    e.into(),
-                )
-            })?;
-        Ok(Box::new(serial))
-    }
+    Ok(
+        match crate::link::open(&settings.port, settings.baud, settings.timeout())? {
+            crate::link::Port::Tcp(s) => Box::new(s),
+            crate::link::Port::Serial(s) => Box::new(s),
+        },
+    )
 }
 
 /// What the robot told about itself in its SYNC2 echo.
