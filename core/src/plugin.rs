@@ -455,4 +455,43 @@ mod tests {
         assert_eq!(e.to_string(), "the plugin panicked: motor on fire");
         assert!(matches!(robot.read(), Err(RobotError::Ended)));
     }
+
+    struct Broken;
+    impl Solver for Broken {
+        fn name(&self) -> &str {
+            "broken"
+        }
+        fn solve(&self, _: &LinearProblem<'_>) -> std::result::Result<LinearFit, SolveError> {
+            panic!("singular by design")
+        }
+    }
+
+    #[test]
+    fn solvers_register_and_their_panics_become_solve_errors() {
+        let mut r = Registrar::default();
+        assert_eq!(
+            run_registration(&mut r, |r| r.solver("broken", |_| Ok(Box::new(Broken)))),
+            0
+        );
+        let (robots, models, solvers) = r.into_parts();
+        assert!(robots.is_empty() && models.is_empty());
+        assert_eq!(solvers.len(), 1);
+        assert_eq!(solvers[0].0, "broken");
+        let solver = solvers[0].1.make("type = \"broken\"").expect("made");
+        assert_eq!(solver.name(), "broken");
+        let (x, y) = (nalgebra::DMatrix::zeros(3, 1), nalgebra::DVector::zeros(3));
+        let problem = LinearProblem {
+            x: &x,
+            y: &y,
+            names: &["a"],
+            bounds: None,
+            correlation_lags: 0,
+        };
+        assert_eq!(
+            solver.solve(&problem).err(),
+            Some(SolveError::Numerical(
+                "the plugin panicked: singular by design".into()
+            ))
+        );
+    }
 }
