@@ -161,6 +161,18 @@ impl<R: Robot, H> Robot for WithServer<R, H> {
     }
 }
 
+/// The robot connected to a loopback `server`, kept together (the server stops when the
+/// robot is dropped).
+fn with_server<R: Robot + 'static, H: 'static>(
+    server: H,
+    robot: Result<R, RobotError>,
+) -> Result<Box<dyn Robot>> {
+    Ok(Box::new(WithServer {
+        robot: robot?,
+        _server: server,
+    }))
+}
+
 /// The port value that starts the project's loopback server.
 const LOOPBACK: &str = "loopback";
 
@@ -174,15 +186,14 @@ impl RobotSpec for PioneerSettings {
                 wheelid_robots::pioneer::Pacing::LockStep,
             )
             .context("starting the ARCOS loopback server")?;
-            let settings = PioneerSettings {
-                port: server.url(),
-                ..self.clone()
-            };
-            let robot = Pioneer::connect(&settings)?;
-            return Ok(Box::new(WithServer {
-                robot,
-                _server: server,
-            }));
+            let port = server.url();
+            return with_server(
+                server,
+                Pioneer::connect(&PioneerSettings {
+                    port,
+                    ..self.clone()
+                }),
+            );
         }
         Ok(Box::new(Pioneer::connect(self)?))
     }
@@ -204,11 +215,7 @@ impl RobotSpec for KheperaSettings {
                 realtime: false,
                 ..self.clone()
             };
-            let robot = Khepera::connect(&settings)?;
-            return Ok(Box::new(WithServer {
-                robot,
-                _server: server,
-            }));
+            return with_server(server, Khepera::connect(&settings));
         }
         Ok(Box::new(Khepera::connect(self)?))
     }
