@@ -58,3 +58,12 @@ pub fn open(port: &str, baud: u32, timeout: Duration) -> Result<Port, RobotError
     }
     Err(RobotError::io(what("connecting"), last))
 }
+
+/// Whether a read error only means "nothing yet" (a timeout or an interrupted call) rather than
+/// a broken link.
+pub fn is_transient(e: &io::Error) -> bool {
+    matches!(
+        e.kind(),
+        io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut | io::ErrorKind::Interrupted
+    )
+}

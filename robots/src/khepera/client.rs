@@ -89,13 +89,7 @@ impl Channel {
                     ));
                 }
                 Ok(n) => self.pending.extend_from_slice(&chunk[..n]),
-                Err(e)
-                    if matches!(
-                        e.kind(),
-                        io::ErrorKind::WouldBlock
-                            | io::ErrorKind::TimedOut
-                            | io::ErrorKind::Interrupted
-                    ) => {}
+                Err(e) if crate::link::is_transient(&e) => {}
                 Err(e) => {
                     return Err(RobotError::io(
                         format!("{}: reading the answer to `{command}`", self.port),

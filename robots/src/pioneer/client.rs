@@ -325,13 +325,7 @@ impl Pioneer {
                     ));
                 }
                 Ok(n) => self.reader.push(&chunk[..n]),
-                Err(e)
-                    if matches!(
-                        e.kind(),
-                        io::ErrorKind::WouldBlock
-                            | io::ErrorKind::TimedOut
-                            | io::ErrorKind::Interrupted
-                    ) => {}
+                Err(e) if crate::link::is_transient(&e) => {}
                 Err(e) => return Err(RobotError::io(what, e)),
             }
         }

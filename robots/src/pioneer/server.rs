@@ -259,13 +259,7 @@ impl<'a> Session<'a> {
                     self.reader.push(&chunk[..n]);
                     self.last_rx = Instant::now();
                 }
-                Err(e)
-                    if matches!(
-                        e.kind(),
-                        io::ErrorKind::WouldBlock
-                            | io::ErrorKind::TimedOut
-                            | io::ErrorKind::Interrupted
-                    ) => {}
+                Err(e) if crate::link::is_transient(&e) => {}
                 Err(e) => return Err(e),
             }
         }
