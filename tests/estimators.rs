@@ -295,3 +295,51 @@ fn output_error_fits_a_dead_time_by_finite_differences() {
         );
     }
 }
+
+#[test]
+fn output_error_hands_back_its_jacobian_at_the_optimum() {
+    // The fit's `jacobian` is ∂ŷ/∂(θ, x0) at θ̂ over the rows in the cost (a mask keeps every
+    // other block of 100 samples), time-major: checked against central differences of the
+    // model's own simulation there, which knows nothing of the fitter.
+    use wheelid::core::DynamicModel;
+    let robot = RobotProfile::pioneer3dx();
+    let rec = recording(&robot, 5, 60.0);
+    let mask: Vec<bool> = (0..rec.len()).map(|k| (k / 100) % 2 == 0).collect();
+    let oe = OutputError {
+        mask: Some(vec![mask.clone()]),
+        ..OutputError::default()
+    };
+    let fit = oe
+        .fit(&VwPd, std::slice::from_ref(&rec), &robot.theta)
+        .expect("fits");
+    let rows: Vec<usize> = (0..rec.len()).filter(|&k| mask[k]).collect();
+    assert_eq!(fit.jacobian.shape(), (2 * rows.len(), 8));
+    let x0 = &fit.initial[0];
+    for j in 0..8 {
+        let (mut th, mut x) = (fit.theta.clone(), x0.clone());
+        let at = if j < 6 { th[j] } else { x[j - 6] };
+        let h = 1e-5 * at.abs().max(1e-2);
+        let mut sim = |d: f64| {
+            if j < 6 {
+                th[j] = at + d;
+            } else {
+                x[j - 6] = at + d;
+            }
+            VwPd.simulate(&th, &rec, &x).expect("simulates")
+        };
+        let (up, dn) = (sim(h), sim(-h));
+        let col = fit.jacobian.column(j);
+        let scale = col.amax();
+        assert!(scale > 0.0, "column {j} is zero");
+        for (i, &k) in rows.iter().enumerate() {
+            for c in 0..2 {
+                let fd = (up[c][k] - dn[c][k]) / (2.0 * h);
+                assert!(
+                    (col[2 * i + c] - fd).abs() < 1e-4 * scale,
+                    "column {j}, sample {k}, channel {c}: {} vs central difference {fd}",
+                    col[2 * i + c]
+                );
+            }
+        }
+    }
+}

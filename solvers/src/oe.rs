@@ -23,10 +23,13 @@
 //! unconstrained in u and every trial θ is feasible.
 //!
 //! **Weights.** σ_c is the residual standard deviation of channel c, first at the starting θ;
-//! after each minimisation it is taken again at the optimum, and if a weight 1/σ_c moved by
-//! more than 10 % the problem is solved again from there (at most three passes; a repeat starts
-//! converged and costs a few evaluations). Any fixed weights give a consistent θ̂; these make
-//! it efficient when the channels' noise levels differ.
+//! after each minimisation it is taken again at the optimum, and if the weights' *ratio*
+//! σ_1/σ_c moved by more than 10 % the problem is solved again from there (at most three
+//! passes; a repeat starts converged and costs a few evaluations). A common scale of the
+//! weights does not move the minimiser, so a change of scale alone calls for no new pass; the
+//! weights at θ̂ are still the ones the cost and the covariance are reported with. Any fixed
+//! weights give a consistent θ̂; these make it efficient when the channels' noise levels
+//! differ.
 //!
 //! **Uncertainty.** At θ̂ the weighted Jacobian J (rows time-major: sample k, then channel c)
 //! and the weighted residuals e give the sandwich covariance
@@ -118,6 +121,13 @@ pub struct OutputErrorFit {
     pub bound_state: Vec<BoundState>,
     /// Residual correlation length used for the covariance [samples].
     pub correlation_lags: usize,
+    /// Sensitivities ∂ŷ/∂(θ, x0) at θ̂ (or within the last converged step of it, see
+    /// [`OutputError::fit`]), unweighted: one row per residual in the cost, time-major (sample
+    /// k of recording r, then channel c — the rows of the cost in order), columns θ then each
+    /// recording's initial state (when estimated). Rows × (p + channels · recordings). It is
+    /// the Jacobian the covariance was computed from; a caller that tests the residual against
+    /// other directions (a score test) projects it out without simulating again.
+    pub jacobian: DMatrix<f64>,
     /// Wall time of the fit [s].
     pub seconds: f64,
 }
@@ -219,8 +229,14 @@ type FdColumn = (usize, f64, Vec<Vec<f64>>, Vec<Vec<f64>>);
 
 /// Most minimisations: a second (third) one only if the noise weights moved.
 const MAX_PASSES: usize = 3;
-/// Relative change of a channel weight 1/σ_c that calls for another pass.
+/// Relative change of a weight ratio σ_1/σ_c that calls for another pass.
 const WEIGHT_TOLERANCE: f64 = 0.1;
+
+/// The last iteration's Jacobian serves the covariance if it was taken within this distance of
+/// θ̂, relative to ‖u‖ (the final step of a converged minimisation is far smaller; a Jacobian
+/// a relative 1e-4 away changes the standard errors in their fourth digit at most, for the
+/// smooth simulations this fits).
+const JACOBIAN_REUSE: f64 = 1e-4;
 
 /// Weighted residual of a failed or diverged simulation: large enough that Levenberg–Marquardt
 /// rejects the step and shrinks its trust region.
@@ -444,7 +460,10 @@ impl OutputError {
     /// Fits `model` to `recordings` by output error, starting from `theta0`.
     ///
     /// Every recording must have the outputs the model's channels name (`v`, `w`), at least
-    /// as many samples as there are unknowns, and `theta0` must simulate.
+    /// as many samples as there are unknowns, and `theta0` must simulate. The covariance and
+    /// [`OutputErrorFit::jacobian`] use the last iteration's Jacobian when it was taken within
+    /// 10⁻⁴ ‖u‖ of the optimum (u: θ in the bound transform's variables, then x0), else one
+    /// taken there.
     ///
     /// # Errors
     /// [`SolveError::InvalidProblem`] for wrong lengths, bad bounds, or a starting θ whose
@@ -577,11 +596,19 @@ impl OutputError {
                 .iter()
                 .map(|&sd| 1.0 / sd.max(1e-12))
                 .collect();
-            let settled = weight
-                .iter()
-                .zip(&problem.weight)
-                .all(|(a, b)| (a / b - 1.0).abs() < WEIGHT_TOLERANCE);
+            // Only the ratios move the minimiser (module doc).
+            let settled = weight.iter().zip(&problem.weight).all(|(a, b)| {
+                ((a / weight[0]) / (b / problem.weight[0]) - 1.0).abs() < WEIGHT_TOLERANCE
+            });
             if pass > 0 && settled {
+                // The last Jacobian is re-weighted with the weights at θ̂: rows are
+                // time-major, so row i belongs to channel i mod s.
+                if let Some((_, jac)) = problem.last_jacobian.get_mut() {
+                    for (i, mut row) in jac.row_iter_mut().enumerate() {
+                        row *= weight[i % s] / problem.weight[i % s];
+                    }
+                }
+                problem.weight = weight;
                 break;
             }
             problem.weight = weight;
@@ -611,14 +638,14 @@ impl OutputError {
             _ => SolveStatus::Solved,
         };
         // Uncertainty at θ̂ (module doc), with the Jacobian of the last iteration if it was
-        // taken at θ̂.
+        // taken at θ̂ or within the last, converged step of it.
         let u = problem.u.clone();
         let theta = problem.theta_of(&u);
         let noise_std = channel_std(&raw, &problem.mask, active, unknowns);
         let cached = problem
             .last_jacobian
             .take()
-            .and_then(|(at, j)| (at == u).then_some(j));
+            .and_then(|(at, j)| ((&u - at).norm() <= JACOBIAN_REUSE * u.norm()).then_some(j));
         let jac = match cached {
             Some(j) => j,
             None => problem
@@ -690,6 +717,11 @@ impl OutputError {
         let initial = (0..recordings.len())
             .map(|r| problem.initial_of(&u, r))
             .collect();
+        // The residuals' Jacobian −w_c ∂ŷ/∂(θ, x0) back to plain sensitivities.
+        let mut jacobian = jac;
+        for (i, mut row) in jacobian.row_iter_mut().enumerate() {
+            row *= -1.0 / problem.weight[i % s];
+        }
         Ok(OutputErrorFit {
             std_err: covariance
                 .diagonal()
@@ -706,6 +738,7 @@ impl OutputError {
             status,
             bound_state,
             correlation_lags: lags,
+            jacobian,
             seconds: clock.elapsed().as_secs_f64(),
         })
     }

@@ -364,6 +364,9 @@ struct Current {
     covariance: DMatrix<f64>,
     initial: Vec<Vec<f64>>,
     sim: Outputs,
+    /// The fit's sensitivities to the free parameters and the initial states over the training
+    /// rows, weighted as the frame weights them (the score tests' J), when the fit gave them.
+    jacobian: Option<DMatrix<f64>>,
 }
 
 /// Everything the search needs about the data.
@@ -1078,8 +1081,15 @@ fn fit_candidate(
                 p.push(base + j);
                 let mut th = theta.clone();
                 th[base + j] = null_values(c, &cur.theta, 0.0)[j];
+                // Compared at the common (nominal) weights: each fit's own cost is weighted
+                // by its own noise levels.
+                let cost = |r: &PinnedFit| {
+                    (0..2)
+                        .map(|c| (r.0.noise_std[c] * data.weight[c]).powi(2))
+                        .sum::<f64>()
+                };
                 if let Ok(r) = run(&th, &p)
-                    && best.as_ref().is_none_or(|b| r.0.cost < b.0.0.cost)
+                    && best.as_ref().is_none_or(|b| cost(&r) < cost(&b.0))
                 {
                     best = Some((r, p));
                 }
@@ -1220,6 +1230,7 @@ fn current_of(
         covariance,
         initial: fit.initial.clone(),
         sim,
+        jacobian: Some(data.frame().weigh(&fit.jacobian)),
     })
 }
 
@@ -1456,6 +1467,7 @@ pub fn diagnose(
             ..IdentifySettings::default()
         },
     )?;
+
     let oe = OutputError {
         mask: Some(train.clone()),
         ..OutputError::default()
@@ -1468,6 +1480,7 @@ pub fn diagnose(
         Err(_) if sane => oe.fit(model, &recs, &fallback)?,
         other => other?,
     };
+
     let track = settings
         .track_m
         .or_else(|| recs.iter().find_map(track_from_meta));
@@ -1484,6 +1497,7 @@ pub fn diagnose(
             d.unwrap_or_else(|| [vec![0.0; r.len()], vec![0.0; r.len()]])
         })
         .collect();
+
     let weight = [0, 1].map(|c| 1.0 / nominal_fit.noise_std[c].max(1e-12));
     let data = Data {
         recs,
@@ -1511,6 +1525,7 @@ pub fn diagnose(
         covariance: nominal_fit.covariance.clone(),
         initial: nominal_fit.initial.clone(),
         sim,
+        jacobian: Some(data.frame().weigh(&nominal_fit.jacobian)),
     };
     let stage = |cur: &Current| {
         let (channels, validation_cost) = data.validate(&cur.sim);
@@ -1528,11 +1543,13 @@ pub fn diagnose(
         }
     };
     let nominal = stage(&cur);
+
     bar.inc(1);
     // 2.–3. test and locate
     bar.set_message("testing the residuals");
     let max_lag = data.max_lag(settings);
     let location = locate::locate(&data.recs, &cur.sim, &data.valid, dt, max_lag);
+
     // 4.–5. name, model, accept; then look again.
     let mut findings = Vec::new();
     let mut rejected = Vec::new();
@@ -1548,16 +1565,20 @@ pub fn diagnose(
             .filter(|i| !cur.pinned.contains(i))
             .collect();
         let pinned_model = Pinned::new(&cur_model, cur.theta.clone(), &cur.pinned);
-        let Some(j) = score::jacobian(
-            &pinned_model,
-            &free.iter().map(|&i| cur.theta[i]).collect::<Vec<_>>(),
-            &cur.initial,
-            &cur.sim,
-            &frame,
-        ) else {
+        // The fit's own Jacobian at θ̂ where it gave one, else the sensitivities anew.
+        let Some(j) = cur.jacobian.clone().or_else(|| {
+            score::jacobian(
+                &pinned_model,
+                &free.iter().map(|&i| cur.theta[i]).collect::<Vec<_>>(),
+                &cur.initial,
+                &cur.sim,
+                &frame,
+            )
+        }) else {
             break;
         };
         let q = score::basis(&j);
+
         let pending: Vec<Candidate> = settings
             .candidates
             .iter()
@@ -1578,6 +1599,7 @@ pub fn diagnose(
                 .filter_map(|h| h.join().ok().flatten())
                 .collect()
         });
+
         // The family: residual–command independence (validation) and the fingerprints.
         let here = if round == 0 {
             location.clone()
@@ -1587,6 +1609,7 @@ pub fn diagnose(
         let mut p_values = here.p_values();
         p_values.extend(nominees.iter().map(|n| n.p_value));
         let decisions = holm(&p_values, settings.alpha);
+
         if round == 0 {
             let names = ["v_ref", "w_ref"];
             for (i, ch) in ["v", "w"].iter().enumerate() {
@@ -1666,6 +1689,7 @@ pub fn diagnose(
             }
         }
         ready.sort_by(|a, b| a.1.cost.total_cmp(&b.1.cost));
+
         let mut accepted: Option<(&Nominee, Current, Channels, f64)> = None;
         for (i, st) in ready {
             let n = &nominees[i];
@@ -1804,6 +1828,7 @@ pub fn diagnose(
         }
     }
     bar.set_message("done");
+
     bar.finish_and_clear();
     // Every finding's parameters as the final model has them (the later fits refit them all).
     let mut at = 6;

@@ -70,6 +70,17 @@ impl Frame<'_> {
         DVector::from_vec(out)
     }
 
+    /// The frame's weighting applied to unweighted rows in its order (sample, then channel),
+    /// such as [`OutputErrorFit::jacobian`](wheelid_solvers::OutputErrorFit::jacobian) of a
+    /// fit on the same training rows.
+    pub fn weigh(&self, rows: &DMatrix<f64>) -> DMatrix<f64> {
+        let mut out = rows.clone();
+        for (i, mut row) in out.row_iter_mut().enumerate() {
+            row *= self.weight[i % 2];
+        }
+        out
+    }
+
     /// Weighted training residuals y − ŷ.
     pub fn residuals(&self, sim: &Outputs) -> DVector<f64> {
         let e: Outputs = self
