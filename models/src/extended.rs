@@ -341,7 +341,7 @@ impl DynamicModel for Extended {
     }
     fn simulate(&self, theta: &[f64], rec: &Recording, initial: &[f64]) -> Result<Simulation> {
         let (th0, ph) = self.physics(theta)?;
-        let y = self.integrate::<2, 0>(&th0, &ph, rec, initial, [])?;
+        let y = self.integrate::<2, 0>(&th0, &ph, rec, initial)?;
         Ok(y.to_vec())
     }
 
@@ -353,6 +353,74 @@ impl DynamicModel for Extended {
     ) -> Result<Option<(Simulation, Sensitivities)>> {
         let all: Vec<usize> = (0..self.params.len()).collect();
         self.sensitivities_of(theta, rec, initial, &all).map(Some)
+    }
+}
+
+/// The right-hand side of the module doc's dynamics (friction and slip as fitted), with the
+/// sensitivity equations when `M` = [`NS`].
+struct Field {
+    coulomb: [f64; 2],
+    /// Whether dry friction is present (its tanh dominates the cost of a step).
+    dry: bool,
+    slip: [f64; 2],
+}
+
+impl Field {
+    /// ż for the state z = (v, ω, ∂v/∂p, ∂ω/∂p) under command `c`: θ with the reciprocals
+    /// `inv` of θ1, θ2; `changed` after a payload change, when θ1, θ2, θ3, θ5 are no longer
+    /// in force (their columns integrate without a source). Columns 0…7 are θ1…θ6, v0, ω0.
+    #[inline(always)]
+    fn rhs<const N: usize, const M: usize>(
+        &self,
+        th: &[f64; 6],
+        inv: &[f64; 2],
+        changed: bool,
+        z: &[f64; N],
+        c: &Cmd<M>,
+    ) -> [f64; N] {
+        let [kv, kw] = self.slip;
+        let (v, w) = (z[0], z[1]);
+        let u = c.u;
+        let mut fv = u[0] + th[2] * w * w - th[3] * v - th[3] * kv * v * w.abs();
+        let mut fw = u[1] - th[4] * v * w - th[5] * w - th[5] * kw * v.abs() * w;
+        let (mut dry_v, mut dry_w) = (0.0, 0.0);
+        if self.dry {
+            let (tv, tw) = ((v / FRICTION_EPS[0]).tanh(), (w / FRICTION_EPS[1]).tanh());
+            fv -= self.coulomb[0] * tv;
+            fw -= self.coulomb[1] * tw;
+            dry_v = self.coulomb[0] * (1.0 - tv * tv) / FRICTION_EPS[0];
+            dry_w = self.coulomb[1] * (1.0 - tw * tw) / FRICTION_EPS[1];
+        }
+        let mut out = [0.0; N];
+        out[0] = fv * inv[0];
+        out[1] = fw * inv[1];
+        if M == NS {
+            let sign = |x: f64| if x == 0.0 { 0.0 } else { x.signum() };
+            let a00 = (-th[3] * (1.0 + kv * w.abs()) - dry_v) * inv[0];
+            let a01 = (2.0 * th[2] * w - th[3] * kv * v * sign(w)) * inv[0];
+            let a10 = (-th[4] * w - th[5] * kw * sign(v) * w) * inv[1];
+            let a11 = (-th[4] * v - th[5] * (1.0 + kw * v.abs()) - dry_w) * inv[1];
+            for a in 0..M {
+                let (sv, sw) = (z[2 + a], z[2 + M + a]);
+                out[2 + a] = a00 * sv + a01 * sw;
+                out[2 + M + a] = a10 * sv + a11 * sw;
+            }
+            if c.live {
+                for a in 0..M {
+                    out[2 + a] += c.du[0][a] * inv[0];
+                    out[2 + M + a] += c.du[1][a] * inv[1];
+                }
+            }
+            // ∂f/∂θ: the sources of θ1…θ6's columns (v0, ω0 have none).
+            let held = if changed { 0.0 } else { 1.0 };
+            out[2] -= held * out[0] * inv[0];
+            out[2 + M + 1] -= held * out[1] * inv[1];
+            out[2 + 2] += held * w * w * inv[0];
+            out[2 + 3] -= v * (1.0 + kv * w.abs()) * inv[0];
+            out[2 + M + 4] -= held * v * w * inv[1];
+            out[2 + M + 5] -= w * (1.0 + kw * v.abs()) * inv[1];
+        }
+        out
     }
 }
 
@@ -444,12 +512,11 @@ impl Extended {
                         let mut th = theta.to_vec();
                         th[j] += step(j);
                         let (t, p) = self.physics(&th)?;
-                        self.integrate::<2, 0>(&t, &p, rec, initial, [])
+                        self.integrate::<2, 0>(&t, &p, rec, initial)
                     })
                 })
                 .collect();
-            let all = std::array::from_fn(|j| j);
-            let z = self.integrate::<NZ, NS>(&th0, &ph, rec, initial, all);
+            let z = self.integrate::<NZ, NS>(&th0, &ph, rec, initial);
             let fd: Vec<Result<[Vec<f64>; 2]>> = handles
                 .into_iter()
                 .map(|h| {
@@ -505,18 +572,17 @@ impl Extended {
 
     /// The simulation of the module doc on the recording's samples: with `N` = 2, `M` = 0 the
     /// outputs (v̂, ω̂); with `N` = [`NZ`], `M` = [`NS`] also their sensitivities to the
-    /// parameters `cols` of (θ1…θ6, v0, ω0) (channels 2 + c·M + a: ∂ŷ_c/∂p_cols[a]).
+    /// parameters (θ1…θ6, v0, ω0) (`M` = [`NS`]; channels 2 + c·M + j: ∂ŷ_c/∂p_j).
     fn integrate<const N: usize, const M: usize>(
         &self,
         th0: &[f64; 6],
         ph: &Physics,
         rec: &Recording,
         initial: &[f64],
-        cols: [usize; M],
     ) -> Result<[Vec<f64>; N]> {
         let sens = M > 0;
         // Where each parameter's column sits in this pass (None: not in it).
-        let slot = |j: usize| cols.iter().position(|&c| c == j);
+        let slot = |j: usize| (j < M).then_some(j);
         let &[v0, w0] = initial else {
             return Err(Error::InvalidSetting(format!(
                 "initial state must be [v, ω], got {} values",
@@ -613,50 +679,10 @@ impl Extended {
             )
         };
         let (before, after) = (prepare(*th0, false), th_after.map(|a| prepare(a, true)));
-        let [kv, kw] = ph.slip;
-        let rhs = |th: &[f64; 6], inv: &[f64; 2], changed: bool, z: &[f64; N], c: Cmd<M>| {
-            let (v, w) = (z[0], z[1]);
-            let u = c.u;
-            let mut fv = u[0] + th[2] * w * w - th[3] * v - th[3] * kv * v * w.abs();
-            let mut fw = u[1] - th[4] * v * w - th[5] * w - th[5] * kw * v.abs() * w;
-            let (mut dry_v, mut dry_w) = (0.0, 0.0);
-            if dry {
-                let (tv, tw) = ((v / FRICTION_EPS[0]).tanh(), (w / FRICTION_EPS[1]).tanh());
-                fv -= ph.coulomb[0] * tv;
-                fw -= ph.coulomb[1] * tw;
-                dry_v = ph.coulomb[0] * (1.0 - tv * tv) / FRICTION_EPS[0];
-                dry_w = ph.coulomb[1] * (1.0 - tw * tw) / FRICTION_EPS[1];
-            }
-            let mut out = [0.0; N];
-            out[0] = fv * inv[0];
-            out[1] = fw * inv[1];
-            if sens {
-                let sign = |x: f64| if x == 0.0 { 0.0 } else { x.signum() };
-                let a00 = (-th[3] * (1.0 + kv * w.abs()) - dry_v) * inv[0];
-                let a01 = (2.0 * th[2] * w - th[3] * kv * v * sign(w)) * inv[0];
-                let a10 = (-th[4] * w - th[5] * kw * sign(v) * w) * inv[1];
-                let a11 = (-th[4] * v - th[5] * (1.0 + kw * v.abs()) - dry_w) * inv[1];
-                for a in 0..M {
-                    let (sv, sw) = (z[2 + a], z[2 + M + a]);
-                    out[2 + a] = a00 * sv + a01 * sw;
-                    out[2 + M + a] = a10 * sv + a11 * sw;
-                    if c.live {
-                        out[2 + a] += c.du[0][a] * inv[0];
-                        out[2 + M + a] += c.du[1][a] * inv[1];
-                    }
-                    // ∂f/∂θ (θ1, θ2, θ3, θ5 no longer in force after a payload change).
-                    match cols[a] {
-                        0 if !changed => out[2 + a] -= out[0] * inv[0],
-                        1 if !changed => out[2 + M + a] -= out[1] * inv[1],
-                        2 if !changed => out[2 + a] += w * w * inv[0],
-                        3 => out[2 + a] -= v * (1.0 + kv * w.abs()) * inv[0],
-                        4 if !changed => out[2 + M + a] -= v * w * inv[1],
-                        5 => out[2 + M + a] -= w * (1.0 + kw * v.abs()) * inv[1],
-                        _ => {}
-                    }
-                }
-            }
-            out
+        let field = Field {
+            coulomb: ph.coulomb,
+            dry,
+            slip: ph.slip,
         };
         // The rate-limited setpoint starts where it holds the initial state (a robot at rest
         // holds zero), as the simulator's.
@@ -690,7 +716,7 @@ impl Extended {
             };
             let ca = command(if zoh { 0.5 * (ta + tb) } else { ta } - ph.delay);
             let cb = if zoh { ca } else { command(tb - ph.delay) };
-            let rhs_at = |x: &[f64; N], c: Cmd<M>| rhs(&th, &inv, changed, x, c);
+            let rhs_at = |x: &[f64; N], c: Cmd<M>| field.rhs(&th, &inv, changed, x, &c);
             let steps = (span / h_max).ceil().max(1.0) as usize;
             let h = span / steps as f64;
             let mut q = [0.0; N];
