@@ -5,8 +5,9 @@
 //!
 //! 1. **fit** — every recording is cut into [`DiagnoseSettings::blocks`] equal blocks; the odd
 //!    ones (2nd, 4th, …) are held out for validation and never enter a fit. θ is fitted by
-//!    output error (`wheelid_solvers::oe`, started from least squares) on the rest, the model
-//!    simulated free-run over the whole recording;
+//!    output error (`wheelid_solvers::oe`, started from least squares, to a relative 1e-6 in
+//!    cost and step — the candidates' fits stop at 1e-5 — far inside its standard errors) on
+//!    the rest, the model simulated free-run over the whole recording;
 //! 2. **test** — on the validation blocks: residual whiteness (Ljung–Box) and residual–command
 //!    independence (cross-correlation at lags −L…L with Ljung's bounds,
 //!    `wheelid_core::residual`), free-run fit %; on the training blocks: each candidate's
@@ -293,6 +294,10 @@ const MAX_BLOCKS: usize = 50;
 
 /// Fractions of a limit's data-read level at which its fingerprint is probed.
 const PROBE_FRACTIONS: [f64; 3] = [0.7, 0.85, 1.0];
+
+/// Relative tolerance (cost and step) of the nominal output-error fit: its θ moves by far
+/// less than a standard error below it, and the score tests project the fit's Jacobian out.
+const NOMINAL_TOLERANCE: f64 = 1e-6;
 
 /// A value far beyond any command: a limit at this level never binds.
 const NEVER: f64 = 1e6;
@@ -1470,6 +1475,7 @@ pub fn diagnose(
 
     let oe = OutputError {
         mask: Some(train.clone()),
+        tolerance: NOMINAL_TOLERANCE,
         ..OutputError::default()
     };
     // Least squares can come out unphysical (a long dead time makes the regression's θ1
