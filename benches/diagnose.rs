@@ -3,15 +3,20 @@
 //! * `clean`: the recording as the model describes it (fit, tests, fingerprints: nothing to
 //!   add);
 //! * `dead_time`: the same robot with a concealed 80 ms dead time (found, fitted, accepted,
-//!   then a second round of the search).
+//!   then a second round of the search);
+//! * group `…_each_effect`: the other candidates concealed one at a time, and two pairs, at
+//!   magnitudes inside the ranges of `tests/diagnose.rs` (each is found; checked there).
 //!
-//! Run: `cargo bench --bench diagnose`.
+//! Run: `cargo bench --bench diagnose` (`-- dead_time` for the case alone).
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use wheelid::core::Recording;
 use wheelid::diagnose::{DiagnoseSettings, diagnose};
 use wheelid::models::VwPd;
-use wheelid::robots::effects::{Effects, InputDelay};
+use wheelid::robots::effects::{
+    AccelerationLimit, CoulombFriction, Effects, GainDrift, InputDelay, PayloadChange, Slip,
+    VelocitySaturation, WheelAsymmetry,
+};
 use wheelid::robots::{Excitation, RobotProfile, SimSettings, simulate_recording};
 
 fn recording(effects: Effects) -> Recording {
@@ -48,6 +53,101 @@ fn bench(c: &mut Criterion) {
     g.bench_function("dead_time", |b| {
         b.iter(|| diagnose(std::slice::from_ref(&delayed), &VwPd, &settings).expect("runs"))
     });
+    g.finish();
+
+    // Magnitudes: a quarter of the robot's v_max, w_max is the multisine's amplitude (va, wa).
+    let robot = RobotProfile::khepera3();
+    let (va, wa) = (0.25 * robot.v_max, 0.25 * robot.w_max);
+    let delay = InputDelay { delay_s: 0.08 };
+    let saturation = VelocitySaturation {
+        v_max: 1.4 * va,
+        w_max: 0.55 * wa,
+    };
+    let accel = AccelerationLimit {
+        v_accel_max: 0.1,
+        w_accel_max: 2.26,
+    };
+    let asymmetry = WheelAsymmetry { ratio: 1.08 };
+    let cases: Vec<(&str, Effects)> = vec![
+        (
+            "acceleration_limit",
+            Effects {
+                acceleration_limit: Some(accel),
+                ..Effects::default()
+            },
+        ),
+        (
+            "velocity_saturation",
+            Effects {
+                velocity_saturation: Some(saturation),
+                ..Effects::default()
+            },
+        ),
+        (
+            "coulomb_friction",
+            Effects {
+                coulomb_friction: Some(CoulombFriction {
+                    v_coulomb: 0.08 * va,
+                    w_coulomb: 0.08 * wa,
+                }),
+                ..Effects::default()
+            },
+        ),
+        (
+            "wheel_asymmetry",
+            Effects {
+                wheel_asymmetry: Some(asymmetry),
+                ..Effects::default()
+            },
+        ),
+        (
+            "payload_change",
+            Effects {
+                payload_change: Some(PayloadChange::scaled(300.0, robot.theta, 1.5)),
+                ..Effects::default()
+            },
+        ),
+        (
+            "gain_drift",
+            Effects {
+                gain_drift: Some(GainDrift {
+                    rate_per_s: -0.3 / 600.0,
+                }),
+                ..Effects::default()
+            },
+        ),
+        (
+            "slip",
+            Effects {
+                slip: Some(Slip { k_v: 0.3, k_w: 0.3 }),
+                ..Effects::default()
+            },
+        ),
+        (
+            "dead_time+saturation",
+            Effects {
+                input_delay: Some(delay),
+                velocity_saturation: Some(saturation),
+                ..Effects::default()
+            },
+        ),
+        (
+            "acceleration_limit+asymmetry",
+            Effects {
+                acceleration_limit: Some(accel),
+                wheel_asymmetry: Some(asymmetry),
+                ..Effects::default()
+            },
+        ),
+    ];
+    let mut g = c.benchmark_group("diagnose_khepera_10min_50hz_each_effect");
+    g.sample_size(10);
+    for (name, effects) in cases {
+        let rec = recording(effects);
+        g.bench_function(name, |b| {
+            b.iter(|| diagnose(std::slice::from_ref(&rec), &VwPd, &settings).expect("runs"))
+        });
+    }
     g.finish();
 }
 

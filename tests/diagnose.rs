@@ -372,3 +372,44 @@ fn husky_yaw_rate_limit_and_ramps_lift_the_turn_fit_above_90_percent() {
         .expect("a ramp");
     assert!((1.0..4.0).contains(&ramp), "w_accel_max = {ramp}");
 }
+
+#[test]
+fn names_an_acceleration_limit_the_nominal_lag_absorbed() {
+    // Ten minutes of the Khepera III at 50 Hz, both setpoints ramped at 0.45 of the commands'
+    // 95th-percentile rate: the nominal fit trades the ramps for a lag 20× too slow (θ1 0.45 s
+    // against 0.023 s), where a limit hardly binds. Started only from there the fit stopped at
+    // v_accel_max 2.7× too high with v's validation fit at 60 %; the second start, with the
+    // lag shortened, finds both limits.
+    let robot = RobotProfile::khepera3();
+    let seed = 3;
+    let a = [0, 1].map(|ch| 0.45 * rate_p95(&robot, seed, ch));
+    let effects = Effects {
+        acceleration_limit: Some(AccelerationLimit {
+            v_accel_max: a[0],
+            w_accel_max: a[1],
+        }),
+        ..Effects::default()
+    };
+    let duration_s = 600.0;
+    let rec = record(&robot, seed, duration_s, effects);
+    let d = diagnose(&[rec], &VwPd, &DiagnoseSettings::default()).expect("diagnosis runs");
+    let c = Case {
+        robot,
+        names: vec!["acceleration_limit"],
+        truth: vec![("v_accel_max", a[0]), ("w_accel_max", a[1])],
+        duration_s,
+        d,
+    };
+    assert_eq!(verdict(&c), None);
+    let f = &c.d.findings[0];
+    for (p, want) in &c.truth {
+        let got = f.parameters[*p];
+        assert!(
+            ((got - want) / want).abs() < 0.02,
+            "{p} = {got}, true {want}"
+        );
+    }
+    for fit in [f.fit_percent_after["v"], f.fit_percent_after["w"]] {
+        assert!(fit > 90.0, "validation fit {fit} %");
+    }
+}

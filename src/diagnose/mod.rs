@@ -986,25 +986,10 @@ fn start_candidate(
         c,
         Candidate::VelocitySaturation | Candidate::AccelerationLimit
     ) {
-        let probe = theta.clone();
-        let mut best = (training_cost(&probe), 1.0);
-        for f in [0.5, 0.7, 0.85, 1.2, 1.5, 2.0] {
-            let mut th = probe.clone();
-            for j in 0..2 {
-                if !nominee.pattern.inactive.contains(&j) && th[base + j] < NEVER {
-                    th[base + j] *= f;
-                }
-            }
-            let cost = training_cost(&th);
-            if cost < best.0 {
-                best = (cost, f);
-            }
-        }
-        for j in 0..2 {
-            if probe[base + j] < NEVER {
-                theta[base + j] = probe[base + j] * best.1;
-            }
-        }
+        let active: Vec<usize> = (0..2)
+            .filter(|j| !nominee.pattern.inactive.contains(j))
+            .collect();
+        theta = level_grid(&theta, base, &active, &training_cost);
     }
     // A dead time is searched on a grid first: its cost has many local minima.
     if c == Candidate::InputDelay {
@@ -1045,6 +1030,36 @@ fn start_candidate(
     })
 }
 
+/// θ with a limit's `active` channels (0: v, 1: ω) scaled: their level (θ[base + j], unless
+/// it never binds) by `level`, their θ1 or θ2 (θ[j]) by `lag`.
+fn scaled(theta: &[f64], base: usize, active: &[usize], level: f64, lag: f64) -> Vec<f64> {
+    let mut th = theta.to_vec();
+    for &j in active {
+        if th[base + j] < NEVER {
+            th[base + j] *= level;
+        }
+        th[j] *= lag;
+    }
+    th
+}
+
+/// A limit's level scaled by the best of a few factors (0.5…2) by `cost`.
+fn level_grid(
+    theta: &[f64],
+    base: usize,
+    active: &[usize],
+    cost: &dyn Fn(&[f64]) -> f64,
+) -> Vec<f64> {
+    let mut best = (cost(theta), 1.0);
+    for f in [0.5, 0.7, 0.85, 1.2, 1.5, 2.0] {
+        let c = cost(&scaled(theta, base, active, f, 1.0));
+        if c < best.0 {
+            best = (c, f);
+        }
+    }
+    scaled(theta, base, active, best.1, 1.0)
+}
+
 /// Fits the current model plus `nominee` on the training blocks from `start`; returns the new
 /// state and the fit.
 fn fit_candidate(
@@ -1059,7 +1074,7 @@ fn fit_candidate(
     let model = data.model(&cands);
     let base = cur.theta.len();
     let Start {
-        theta,
+        mut theta,
         bounds,
         mut pinned,
         ..
@@ -1076,7 +1091,45 @@ fn fit_candidate(
             | Candidate::Slip
     );
     let both_free = (0..2).all(|j| !pinned.contains(&(base + j)));
-    let (mut fit, mut full, mut free) = match run(&theta, &pinned) {
+    // Compared at the common (nominal) weights: each fit's own cost is weighted by its own
+    // noise levels.
+    let cost = |r: &PinnedFit| {
+        (0..2)
+            .map(|c| (r.0.noise_std[c] * data.weight[c]).powi(2))
+            .sum::<f64>()
+    };
+    let mut first = run(&theta, &pinned);
+    // A rate limit the nominal model lacks is traded for a slower lag (θ1, θ2 too large, a
+    // limit then hardly binds): the fit also runs from the active channels' θ1, θ2 shortened
+    // (a coarse grid with the level, then the level's grid), the better fit kept. Not in the
+    // screen: a fast lag with a ramp also imitates a dead time, which must still rank first
+    // where it is one.
+    let active: Vec<usize> = (0..2).filter(|j| !pinned.contains(&(base + j))).collect();
+    let alternative = (c == Candidate::AccelerationLimit).then(|| {
+        let training_cost = |th: &[f64]| {
+            simulate_all(&model, th, &data.recs, &cur.initial)
+                .map_or(f64::INFINITY, |y| frame.residuals(&y).norm_squared())
+        };
+        let mut best = (f64::INFINITY, 1.0, 1.0);
+        for lag in [0.3, 0.1, 0.03] {
+            for level in [0.5, 1.0, 2.0] {
+                let cost = training_cost(&scaled(&theta, base, &active, level, lag));
+                if cost < best.0 {
+                    best = (cost, level, lag);
+                }
+            }
+        }
+        let from = scaled(&theta, base, &active, best.1, best.2);
+        level_grid(&from, base, &active, &training_cost)
+    });
+    if let Some(alt) = alternative
+        && let Ok(r) = run(&alt, &pinned)
+        && first.as_ref().map_or(true, |f| cost(&r) < cost(f))
+    {
+        first = Ok(r);
+        theta = alt;
+    }
+    let (mut fit, mut full, mut free) = match first {
         Ok(r) => r,
         // Both channels cannot be told apart (one never acts): each alone, the better kept.
         Err(first) if two && both_free => {
@@ -1086,13 +1139,6 @@ fn fit_candidate(
                 p.push(base + j);
                 let mut th = theta.clone();
                 th[base + j] = null_values(c, &cur.theta, 0.0)[j];
-                // Compared at the common (nominal) weights: each fit's own cost is weighted
-                // by its own noise levels.
-                let cost = |r: &PinnedFit| {
-                    (0..2)
-                        .map(|c| (r.0.noise_std[c] * data.weight[c]).powi(2))
-                        .sum::<f64>()
-                };
                 if let Ok(r) = run(&th, &p)
                     && best.as_ref().is_none_or(|b| cost(&r) < cost(&b.0))
                 {
