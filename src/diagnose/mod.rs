@@ -1518,7 +1518,6 @@ pub fn diagnose(
             ..IdentifySettings::default()
         },
     )?;
-
     let oe = OutputError {
         mask: Some(train.clone()),
         tolerance: NOMINAL_TOLERANCE,
@@ -1532,7 +1531,6 @@ pub fn diagnose(
         Err(_) if sane => oe.fit(model, &recs, &fallback)?,
         other => other?,
     };
-
     let track = settings
         .track_m
         .or_else(|| recs.iter().find_map(track_from_meta));
@@ -1549,7 +1547,6 @@ pub fn diagnose(
             d.unwrap_or_else(|| [vec![0.0; r.len()], vec![0.0; r.len()]])
         })
         .collect();
-
     let weight = [0, 1].map(|c| 1.0 / nominal_fit.noise_std[c].max(1e-12));
     let data = Data {
         recs,
@@ -1595,13 +1592,11 @@ pub fn diagnose(
         }
     };
     let nominal = stage(&cur);
-
     bar.inc(1);
     // 2.–3. test and locate
     bar.set_message("testing the residuals");
     let max_lag = data.max_lag(settings);
     let location = locate::locate(&data.recs, &cur.sim, &data.valid, dt, max_lag);
-
     // 4.–5. name, model, accept; then look again.
     let mut findings = Vec::new();
     let mut rejected = Vec::new();
@@ -1618,19 +1613,24 @@ pub fn diagnose(
             .collect();
         let pinned_model = Pinned::new(&cur_model, cur.theta.clone(), &cur.pinned);
         // The fit's own Jacobian at θ̂ where it gave one, else the sensitivities anew.
-        let Some(j) = cur.jacobian.clone().or_else(|| {
-            score::jacobian(
-                &pinned_model,
-                &free.iter().map(|&i| cur.theta[i]).collect::<Vec<_>>(),
-                &cur.initial,
-                &cur.sim,
-                &frame,
-            )
-        }) else {
-            break;
+        let fresh;
+        let j = match &cur.jacobian {
+            Some(j) => j,
+            None => {
+                let Some(x) = score::jacobian(
+                    &pinned_model,
+                    &free.iter().map(|&i| cur.theta[i]).collect::<Vec<_>>(),
+                    &cur.initial,
+                    &cur.sim,
+                    &frame,
+                ) else {
+                    break;
+                };
+                fresh = x;
+                &fresh
+            }
         };
-        let q = score::basis(&j);
-
+        let q = score::basis(j);
         let pending: Vec<Candidate> = settings
             .candidates
             .iter()
@@ -1651,7 +1651,6 @@ pub fn diagnose(
                 .filter_map(|h| h.join().ok().flatten())
                 .collect()
         });
-
         // The family: residual–command independence (validation) and the fingerprints.
         let here = if round == 0 {
             location.clone()
@@ -1661,7 +1660,6 @@ pub fn diagnose(
         let mut p_values = here.p_values();
         p_values.extend(nominees.iter().map(|n| n.p_value));
         let decisions = holm(&p_values, settings.alpha);
-
         if round == 0 {
             let names = ["v_ref", "w_ref"];
             for (i, ch) in ["v", "w"].iter().enumerate() {
@@ -1741,7 +1739,6 @@ pub fn diagnose(
             }
         }
         ready.sort_by(|a, b| a.1.cost.total_cmp(&b.1.cost));
-
         let mut accepted: Option<(&Nominee, Current, Channels, f64)> = None;
         for (i, st) in ready {
             let n = &nominees[i];
@@ -1880,7 +1877,6 @@ pub fn diagnose(
         }
     }
     bar.set_message("done");
-
     bar.finish_and_clear();
     // Every finding's parameters as the final model has them (the later fits refit them all).
     let mut at = 6;
