@@ -5,7 +5,9 @@
 //! * `dead_time`: the same robot with a concealed 80 ms dead time (found, fitted, accepted,
 //!   then a second round of the search);
 //! * group `…_each_effect`: the other candidates concealed one at a time, and two pairs, at
-//!   magnitudes inside the ranges of `tests/diagnose.rs` (each is found; checked there).
+//!   magnitudes inside the ranges of `tests/diagnose.rs`; each case is diagnosed once before
+//!   it is timed and must name exactly its effects (parameters within 20 % when measured for
+//!   the README).
 //!
 //! Run: `cargo bench --bench diagnose` (`-- dead_time` for the case alone).
 
@@ -144,6 +146,20 @@ fn bench(c: &mut Criterion) {
     g.sample_size(10);
     for (name, effects) in cases {
         let rec = recording(effects);
+        let d = diagnose(std::slice::from_ref(&rec), &VwPd, &settings).expect("runs");
+        let mut found: Vec<&str> = d.findings.iter().map(|f| f.effect.as_str()).collect();
+        found.sort_unstable();
+        let mut want: Vec<&str> = name
+            .split('+')
+            .map(|n| match n {
+                "dead_time" => "input_delay",
+                "saturation" => "velocity_saturation",
+                "asymmetry" => "wheel_asymmetry",
+                other => other,
+            })
+            .collect();
+        want.sort_unstable();
+        assert_eq!(found, want, "{name}: the diagnosis must name its effects");
         g.bench_function(name, |b| {
             b.iter(|| diagnose(std::slice::from_ref(&rec), &VwPd, &settings).expect("runs"))
         });
