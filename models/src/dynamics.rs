@@ -47,7 +47,7 @@ pub fn accel(theta: &[f64; 6], v: f64, w: f64, v_ref: f64, w_ref: f64) -> (f64, 
 }
 
 /// A command that varies linearly over an integration step: what [`rk4_step`] needs of it.
-pub(crate) trait StepCommand: Copy {
+pub trait StepCommand: Copy {
     /// The command halfway between `self` and `other`.
     fn midpoint(&self, other: &Self) -> Self;
 }
@@ -61,9 +61,11 @@ impl StepCommand for (f64, f64) {
 
 /// One classical RK4 step of ẋ = f(x, u) of length `h`, with the command varying linearly from
 /// `u0` to `u1` over the step (its midpoint for the middle stages); adds ∫x over the step, by the
-/// same stages, to `q` — window averages to the same order as the state.
+/// same stages, to `q` — window averages to the same order as the state. `x`, `q`: N state
+/// components in their own units; `h` in seconds. Components that fall below 1e-200 are set
+/// to zero (they would stall as slow subnormal numbers). Model plugins integrate with it too.
 #[inline(always)]
-pub(crate) fn rk4_step<const N: usize, U: StepCommand>(
+pub fn rk4_step<const N: usize, U: StepCommand>(
     f: impl Fn(&[f64; N], U) -> [f64; N],
     x: &mut [f64; N],
     q: &mut [f64; N],

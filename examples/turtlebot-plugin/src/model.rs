@@ -29,9 +29,9 @@
 //! costs as much.)
 //!
 //! # Simulation
-//! [`simulate`] integrates with classical RK4 at a fifth of the fastest time constant — θ1/θ4,
-//! θ2/θ6, and the friction's θ1 ε/θ7, θ2 ε/θ8 near zero speed — at most 20 ms and at least
-//! 0.1 ms; commands are held (zero-order hold) or linearly interpolated as the recording says,
+//! [`simulate`] integrates with the host's classical RK4 (`wheelid_models::dynamics::rk4_step`)
+//! at a fifth of the fastest time constant — θ1/θ4, θ2/θ6, and the friction's θ1 ε/θ7, θ2 ε/θ8
+//! near zero speed — at most 20 ms and at least 0.1 ms; commands are held (zero-order hold) or linearly interpolated as the recording says,
 //! and the outputs are instantaneous values or window averages likewise: the semantics of
 //! `wheelid_models::dynamics`.
 
@@ -40,6 +40,7 @@ use wheelid_core::{
     ChannelInfo, ChannelRegression, CommandHold, Conditioned, DynamicModel, Error, ParamInfo,
     Recording, RegressorModel, Result, Simulation, VelocitySampling,
 };
+use wheelid_models::dynamics::rk4_step;
 
 /// Smoothing ε of the friction's sign: [2 mm/s, 0.01 rad/s] (wheelid's value).
 pub const FRICTION_EPS: [f64; 2] = [0.002, 0.01];
@@ -159,30 +160,6 @@ pub fn substep(theta: &[f64; 8]) -> f64 {
         (tau / 5.0).clamp(MIN_SUBSTEP, MAX_SUBSTEP)
     } else {
         MAX_SUBSTEP
-    }
-}
-
-/// One classical RK4 step of length `h` of ẋ = f(x, u), the command going linearly from `u0`
-/// to `u1` over the step; adds ∫x over the step (by the same stages) to `q`.
-pub fn rk4_step<const N: usize>(
-    f: impl Fn(&[f64; N], (f64, f64)) -> [f64; N],
-    x: &mut [f64; N],
-    q: &mut [f64; N],
-    u0: (f64, f64),
-    u1: (f64, f64),
-    h: f64,
-) {
-    let um = (0.5 * (u0.0 + u1.0), 0.5 * (u0.1 + u1.1));
-    let k1 = f(x, u0);
-    let x2: [f64; N] = std::array::from_fn(|i| x[i] + 0.5 * h * k1[i]);
-    let k2 = f(&x2, um);
-    let x3: [f64; N] = std::array::from_fn(|i| x[i] + 0.5 * h * k2[i]);
-    let k3 = f(&x3, um);
-    let x4: [f64; N] = std::array::from_fn(|i| x[i] + h * k3[i]);
-    let k4 = f(&x4, u1);
-    for i in 0..N {
-        q[i] += h / 6.0 * (x[i] + 2.0 * x2[i] + 2.0 * x3[i] + x4[i]);
-        x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
     }
 }
 
