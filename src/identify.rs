@@ -1,14 +1,17 @@
 //! The identification run: recordings in, θ with its uncertainty and the fit out.
 //!
 //! One walk through the layers, each crossed once:
-//! 1. **condition** every recording on its own (`wheelid_core::condition`: resample, align,
-//!    filter — with one cut-off for the run, chosen by the documented rule unless given);
+//! 1. **condition** every recording on its own (`wheelid_core::condition`: restamp a
+//!    window-middle recording to window ends, resample, align, filter — with one cut-off for
+//!    the run, chosen by the documented rule unless given);
 //! 2. **model**: build each recording's regression (eq. 4.2) and stack them per channel;
 //! 3. **fit** each channel's stacked problem with the solver (eq. 4.3–4.7, by SVD or
 //!    with bounds) — the least-squares answer — and then, unless least squares was asked for,
 //!    remove its errors-in-variables bias with the chosen [`Estimator`]: output error
 //!    (`wheelid_solvers::oe`, the default) or instrumental variables (`wheelid_solvers::iv`),
-//!    both started from the least-squares θ;
+//!    both started from the least-squares θ; output error runs on the recordings' own stamps
+//!    (non-uniform ones included) and, where a recording does not state how its host stamped
+//!    it, estimates the command-to-response offset with θ ([`crate::timing`]);
 //! 4. **validate**: simulate the identified model free-run from each recording's commands and
 //!    compare with the measurements (fit %, as MATLAB's `compare`); estimate θ4 and θ6 from
 //!    steady constant-command segments as the thesis's §4.1 suggests.
@@ -16,12 +19,16 @@
 use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
+use wheelid_core::DynamicModel;
 use wheelid_core::condition::{self, ConditionSettings, CutoffChoice};
 use wheelid_core::{
     BoundState, ChannelRegression, Conditioned, LinearProblem, Recording, RegressorModel,
     SolveError, SolveStatus, Solver, metrics,
 };
+use wheelid_models::CommandOffset;
 use wheelid_solvers::{InstrumentalVariables, OutputError};
+
+use crate::timing::{TimingReport, TimingSource, fit_with_timing};
 
 /// Errors of an identification run.
 #[derive(Debug, thiserror::Error)]
@@ -212,6 +219,9 @@ pub struct Identification {
     pub series: Vec<FileSeries>,
     /// Stacked regressions per channel (for the regression plots).
     pub regressions: Vec<ChannelRegression>,
+    /// The stamping convention the output-error fit used, stated or estimated (`None` when
+    /// output error did not run).
+    pub timing: Option<TimingReport>,
 }
 
 /// Runs an identification of `model` with `solver` on `recordings` (one multi-experiment
@@ -239,7 +249,11 @@ pub fn identify(
         )));
     }
     // 1. condition
-    let uniform: Vec<(Recording, Option<f64>)> = recordings
+    let restamped: Vec<Recording> = recordings
+        .iter()
+        .map(condition::restamp)
+        .collect::<Result<_, _>>()?;
+    let uniform: Vec<(Recording, Option<f64>)> = restamped
         .iter()
         .map(condition::make_uniform)
         .collect::<Result<_, _>>()?;
@@ -313,6 +327,11 @@ pub fn identify(
     let mut estimates = vec![ls.clone()];
     let mut initial: Vec<Option<Vec<f64>>> = vec![None; conditioned.len()];
     let mut noise_std = None;
+    let mut timing = None;
+    // The offset δ and the recordings as output error fitted them (restamped, on their own
+    // stamps), which the validation below simulates.
+    let mut offset: Option<f64> = None;
+    let mut fitted_recordings = restamped.clone();
     let refined = |e: Estimator| e == settings.estimator || settings.compare;
     if refined(Estimator::Iv) {
         let clock = std::time::Instant::now();
@@ -361,24 +380,29 @@ pub fn identify(
             bounds: settings.bounds.clone(),
             ..OutputError::default()
         };
-        let uniform: Vec<Recording> = conditioned.iter().map(|c| c.recording.clone()).collect();
-        let fit = oe
-            .fit(model, &uniform, &ls.theta)
-            .map_err(|source| IdentifyError::Solve {
+        let timed = fit_with_timing(model, &restamped, &ls.theta, &oe).map_err(|source| {
+            IdentifyError::Solve {
                 channel: "oe".into(),
                 source,
-            })?;
+            }
+        })?;
+        let fit = timed.fit;
         if settings.estimator == Estimator::Oe {
-            theta.clone_from(&fit.theta);
-            std_err.clone_from(&fit.std_err);
-            bound_state.clone_from(&fit.bound_state);
+            theta = fit.theta[..p].to_vec();
+            std_err = fit.std_err[..p].to_vec();
+            bound_state = fit.bound_state[..p].to_vec();
             initial = fit.initial.iter().cloned().map(Some).collect();
+            if timed.timing.source == TimingSource::Estimated {
+                offset = Some(fit.theta[p]);
+            }
+            fitted_recordings = timed.recordings;
         }
         noise_std = Some(fit.noise_std.clone());
+        timing = Some(timed.timing);
         estimates.push(EstimateReport {
             estimator: Estimator::Oe,
-            theta: fit.theta,
-            std_err: fit.std_err,
+            theta: fit.theta[..p].to_vec(),
+            std_err: fit.std_err[..p].to_vec(),
             status: fit.status,
             iterations: fit.evaluations,
             seconds: fit.seconds,
@@ -395,14 +419,22 @@ pub fn identify(
     let mut files = Vec::new();
     let mut all_meas = vec![Vec::new(); nch];
     let mut all_sim = vec![Vec::new(); nch];
-    for (c, x0) in conditioned.iter().zip(initial) {
-        let rec = &c.recording;
+    let offset_params = CommandOffset::params_of(model);
+    let with_offset = CommandOffset::new(model, &offset_params)?;
+    for ((c, x0), rec) in conditioned.iter().zip(initial).zip(&fitted_recordings) {
         let measured = vec![rec.v.clone(), rec.w.clone()];
         let initial = match x0 {
             Some(x) => x,
             None => vec![c.smooth(&c.v)?[0], c.smooth(&c.w)?[0]],
         };
-        let simulated = model.simulate(&theta, rec, &initial)?;
+        let simulated = match offset {
+            Some(d) => {
+                let mut th = theta.clone();
+                th.push(d);
+                with_offset.simulate(&th, rec, &initial)?
+            }
+            None => model.simulate(&theta, rec, &initial)?,
+        };
         let fits: Vec<f64> = (0..nch)
             .map(|ch| metrics::fit_percent(&measured[ch], &simulated[ch]))
             .collect();
@@ -412,7 +444,7 @@ pub fn identify(
         }
         files.push(FileReport {
             source: c.source.clone(),
-            samples: c.len(),
+            samples: rec.len(),
             dt: c.dt,
             resampled_from: c.resampled_from,
             fit_percent: fits,
@@ -461,6 +493,7 @@ pub fn identify(
         steady_theta6,
         series,
         regressions,
+        timing,
     })
 }
 

@@ -12,7 +12,8 @@
 //! * [`solvers`] (`wheelid-solvers`): OLS and box-bounded least squares;
 //! * [`robots`] (`wheelid-robots`): robot profiles, excitations, the simulator;
 //! * this crate: the identification run ([`identify`]), its files ([`files`]), reports
-//!   ([`report`]) and plots ([`plot`]); config-driven runs ([`run`]) and external plugins
+//!   ([`report`]) and plots ([`plot`]); the stamping convention, stated or estimated
+//!   ([`timing`]); config-driven runs ([`run`]) and external plugins
 //!   ([`plugins`]).
 //!
 //! ```
@@ -34,6 +35,7 @@ pub mod plot;
 pub mod plugins;
 pub mod report;
 pub mod run;
+pub mod timing;
 
 pub use wheelid_core as core;
 pub use wheelid_models as models;

@@ -39,6 +39,7 @@ pub fn to_json(id: &Identification, truth: Option<&[f64]>) -> Value {
         "channels": channels,
         "files": id.files,
         "steady_state": {"theta4": id.steady_theta4, "theta6": id.steady_theta6},
+        "timing": id.timing,
     });
     if let Some(t) = truth {
         v["theta_true"] = json!(t);
@@ -156,6 +157,9 @@ pub fn to_text(id: &Identification, truth: Option<&[f64]>) -> String {
             moved.join(", "),
         );
         let _ = writeln!(s);
+    }
+    if let Some(t) = &id.timing {
+        let _ = writeln!(s, "{}", t.summary);
     }
     if let Some(sd) = &id.noise_std {
         let _ = writeln!(

@@ -28,7 +28,7 @@
 use std::path::PathBuf;
 
 use crate::error::{Error, Result};
-use crate::recording::{CommandHold, Recording, VelocitySampling};
+use crate::recording::{CommandHold, Recording, Timing, VelocitySampling};
 use crate::signal::{self, Butterworth, Sos, Stencil};
 
 /// Settings for [`condition`].
@@ -157,6 +157,45 @@ impl Conditioned {
             other => other,
         }
     }
+}
+
+/// A recording stamped at its windows' middles (`timing: window_middle`, convention (c))
+/// rewritten to window-end stamps (b), which the models simulate; any other recording is
+/// returned as it is.
+///
+/// Under (c) row k's window is [s_k, s_{k+1}], t_k = (s_k + s_{k+1})/2, and its command was
+/// sent at s_k. The window ends are recovered as t'_k = (t_k + t_{k+1})/2 — exact on a uniform
+/// grid, and off by a quarter of the jitter's second difference on a jittered one — the last
+/// one extrapolated by half a period; the command sent at t'_k is row k+1's (the last row's is
+/// held). Metadata: `timing: window_end`, plus `restamped_from: window_middle`.
+///
+/// # Errors
+/// [`Error::TooShort`] for fewer than two samples of a window-middle recording.
+pub fn restamp(rec: &Recording) -> Result<Recording> {
+    if rec.timing() != Some(Timing::WindowMiddle) {
+        return Ok(rec.clone());
+    }
+    let n = rec.len();
+    if n < 2 {
+        return Err(Error::TooShort {
+            file: rec.source.clone(),
+            samples: n,
+            needed: 2,
+            why: "restamping window middles to window ends needs two samples".into(),
+        });
+    }
+    let mut out = rec.clone();
+    for k in 0..n - 1 {
+        out.t[k] = 0.5 * (rec.t[k] + rec.t[k + 1]);
+    }
+    out.t[n - 1] = rec.t[n - 1] + 0.5 * (rec.t[n - 1] - rec.t[n - 2]);
+    for col in [&mut out.v_ref, &mut out.w_ref] {
+        col.rotate_left(1);
+        col[n - 1] = col[n - 2];
+    }
+    out.set_timing(Timing::WindowEnd);
+    out.set_meta("restamped_from", Timing::WindowMiddle.name());
+    Ok(out)
 }
 
 /// Minimum number of samples a recording needs for a filter of this order.
@@ -307,6 +346,33 @@ pub fn condition(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn restamp_moves_window_middles_to_window_ends_and_commands_one_row_earlier() {
+        let t = vec![0.01, 0.03, 0.05, 0.07];
+        let mut r = Recording::new(
+            "c.csv",
+            t,
+            vec![1.0, 2.0, 3.0, 4.0],
+            vec![-1.0, -2.0, -3.0, -4.0],
+            vec![0.1; 4],
+            vec![0.2; 4],
+        )
+        .expect("valid");
+        r.set_timing(Timing::WindowMiddle);
+        let b = restamp(&r).expect("restamps");
+        for (got, want) in b.t.iter().zip([0.02, 0.04, 0.06, 0.08]) {
+            approx::assert_abs_diff_eq!(*got, want, epsilon = 1e-15);
+        }
+        assert_eq!(b.v_ref, vec![2.0, 3.0, 4.0, 4.0]);
+        assert_eq!(b.w_ref, vec![-2.0, -3.0, -4.0, -4.0]);
+        assert_eq!(b.v, r.v);
+        assert_eq!(b.timing(), Some(Timing::WindowEnd));
+        assert_eq!(b.meta("restamped_from"), Some("window_middle"));
+        // Any other convention is left alone.
+        r.set_timing(Timing::Instant);
+        assert_eq!(restamp(&r).expect("as is"), r);
+    }
 
     fn rec(n: usize, dt: f64) -> Recording {
         let t: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();

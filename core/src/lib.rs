@@ -25,6 +25,6 @@ pub use model::{
     ChannelInfo, ChannelRegression, DynamicModel, ParamInfo, RegressorModel, Sensitivities,
     Simulation,
 };
-pub use recording::{CommandHold, Recording, VelocitySampling};
+pub use recording::{CommandHold, Recording, Timing, VelocitySampling};
 pub use robot::{Odometry, Pose, Robot, RobotError};
 pub use solver::{BoundState, LinearFit, LinearProblem, SolveError, SolveStatus, Solver};

@@ -21,6 +21,10 @@
 //! * `velocity_sampling: instant` (default) — `v`, `w` are instantaneous values at `t`;
 //!   `velocity_sampling: window_average` — they are averages over the preceding sample period
 //!   (encoder ticks counted over one cycle, as Pioneer and most base controllers report).
+//! * `timing: instant | window_end | window_middle` — the host's stamping convention (a), (b)
+//!   or (c) of the format ([`Timing`]): what `t` names, what the velocities average, and when the
+//!   row's command acts. It implies `velocity_sampling`. Without it, identification estimates
+//!   the command-to-response offset itself.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -47,6 +51,59 @@ pub enum VelocitySampling {
     Instant,
     /// The average velocity over the sample period that ends at `t`.
     WindowAverage,
+}
+
+/// How a host stamped a recording's rows: which instant `t` names, what the velocities
+/// average, and when the row's command took effect (`shared/data/RECORDING_FORMAT.md`,
+/// "Timing"; metadata key `timing`).
+///
+/// With Δ the sample period, and a sample window [s_k, s_{k+1}] of the host's cycle:
+///
+/// | value | `t_k` | `v_k`, `ω_k` | command of row k acts from |
+/// | --- | --- | --- | --- |
+/// | `instant` (a) | the sample instant | instantaneous at `t_k` | `t_k` |
+/// | `window_end` (b) | the window's end s_{k+1} | mean over [t_k − Δ, t_k] | `t_k` |
+/// | `window_middle` (c) | the window's middle | mean over [t_k − Δ/2, t_k + Δ/2] | `t_k − Δ/2` (window start) |
+///
+/// Under (c) the commands seem to act half a sample *before* their stamps; read as (a) or (b),
+/// a fit absorbs that lead into θ1, θ2 (tens of % at robot sample rates).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Timing {
+    /// (a) velocity at `t`, command from `t` on.
+    Instant,
+    /// (b) velocity averaged over the window ending at `t`, command from `t` on.
+    WindowEnd,
+    /// (c) `t` at the window's middle, velocity averaged over the window, command sent at the
+    /// window's start.
+    WindowMiddle,
+}
+
+impl Timing {
+    /// Every convention, in the order (a), (b), (c).
+    pub const ALL: [Timing; 3] = [Timing::Instant, Timing::WindowEnd, Timing::WindowMiddle];
+
+    /// The metadata value: `instant`, `window_end` or `window_middle`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Timing::Instant => "instant",
+            Timing::WindowEnd => "window_end",
+            Timing::WindowMiddle => "window_middle",
+        }
+    }
+
+    /// The convention named `s` (a metadata value), if any.
+    pub fn parse(s: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|t| t.name() == s.trim())
+    }
+
+    /// What the velocity samples stand for under this convention.
+    pub fn velocity_sampling(self) -> VelocitySampling {
+        match self {
+            Timing::Instant => VelocitySampling::Instant,
+            Timing::WindowEnd | Timing::WindowMiddle => VelocitySampling::WindowAverage,
+        }
+    }
 }
 
 /// One drive: commands and measured velocities on a common time base.
@@ -173,12 +230,51 @@ impl Recording {
         }
     }
 
-    /// What the velocity samples stand for (metadata `velocity_sampling`, default instant).
+    /// What the velocity samples stand for: as metadata `timing` says, else metadata
+    /// `velocity_sampling`, default instant.
     pub fn velocity_sampling(&self) -> VelocitySampling {
+        if let Some(timing) = self.meta("timing").and_then(Timing::parse) {
+            return timing.velocity_sampling();
+        }
         match self.meta("velocity_sampling") {
             Some("window_average") => VelocitySampling::WindowAverage,
             _ => VelocitySampling::Instant,
         }
+    }
+
+    /// The host's stamping convention, if the recording states it: metadata `timing`
+    /// ([`Timing`]), else metadata `velocity_sampling` read as the convention it has always
+    /// meant in this format (`instant` → (a), `window_average` → (b): commands from `t` on).
+    /// `None` when neither is there (or their values are unknown): when the commands act is then
+    /// left to the fit.
+    pub fn timing(&self) -> Option<Timing> {
+        if let Some(t) = self.meta("timing").and_then(Timing::parse) {
+            return Some(t);
+        }
+        match self.meta("velocity_sampling").map(str::trim) {
+            Some("instant") => Some(Timing::Instant),
+            Some("window_average") => Some(Timing::WindowEnd),
+            _ => None,
+        }
+    }
+
+    /// Whether the recording says what its velocity samples stand for (metadata `timing` or
+    /// `velocity_sampling`): the same as `self.timing().is_some()`.
+    pub fn states_velocity_sampling(&self) -> bool {
+        self.timing().is_some()
+    }
+
+    /// States the stamping convention: sets metadata `timing` and the matching
+    /// `velocity_sampling` (for readers that know only that key).
+    pub fn set_timing(&mut self, timing: Timing) {
+        self.set_meta("timing", timing.name());
+        self.set_meta(
+            "velocity_sampling",
+            match timing.velocity_sampling() {
+                VelocitySampling::Instant => "instant",
+                VelocitySampling::WindowAverage => "window_average",
+            },
+        );
     }
 
     /// Sample-period statistics. Needs at least two samples (returns zeros otherwise).
@@ -632,6 +728,26 @@ mod tests {
             matches!(e, Error::Malformed { ref at, .. } if at.line == 3),
             "{e}"
         );
+    }
+
+    #[test]
+    fn timing_metadata_round_trips_and_implies_velocity_sampling() {
+        let text = "# timing: window_middle\nt,v_ref,w_ref,v,w\n0,0,0,0,0\n0.1,1,0,0.5,0\n";
+        let r = Recording::from_csv_str(text, "x.csv").expect("parses");
+        assert_eq!(r.timing(), Some(Timing::WindowMiddle));
+        assert_eq!(r.velocity_sampling(), VelocitySampling::WindowAverage);
+        assert!(r.states_velocity_sampling());
+        let mut plain =
+            Recording::from_csv_str("t,v_ref,w_ref,v,w\n0,0,0,0,0\n0.1,1,0,0.5,0\n", "y")
+                .expect("parses");
+        assert_eq!(plain.timing(), None);
+        assert!(!plain.states_velocity_sampling());
+        plain.set_timing(Timing::Instant);
+        let back = Recording::from_csv_str(&plain.to_csv_string(), "y").expect("parses");
+        assert_eq!(back.timing(), Some(Timing::Instant));
+        assert_eq!(back.meta("velocity_sampling"), Some("instant"));
+        assert_eq!(Timing::parse("window_end"), Some(Timing::WindowEnd));
+        assert_eq!(Timing::parse("middle"), None);
     }
 
     #[test]

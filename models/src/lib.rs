@@ -17,11 +17,13 @@
 //!
 //! Extended models — the six θ plus physics that enters non-linearly, fitted by output error
 //! only: [`InputDelay`] (`delayed`, a dead time on the commands, [`delay`]) and [`Extended`]
-//! (any set of the diagnosis's [`Candidate`] physics, [`extended`]).
+//! (any set of the diagnosis's [`Candidate`] physics, [`extended`]). [`CommandOffset`] gives any
+//! model a signed command-to-response timing offset ([`offset`]): how the host stamped its rows.
 
 pub mod delay;
 pub mod dynamics;
 pub mod extended;
+pub mod offset;
 pub mod physical;
 pub mod regressor;
 
@@ -32,6 +34,7 @@ use wheelid_core::{
 
 pub use delay::InputDelay;
 pub use extended::{Candidate, Extended};
+pub use offset::CommandOffset;
 pub use physical::{Parameterization, VwPdConstants, VwPdMap, WheelPdConstants, WheelPdMap};
 
 macro_rules! six_theta_model {

@@ -1,0 +1,344 @@
+//! The host's stamping convention: stated by a recording, or estimated with θ.
+//!
+//! Hosts stamp rows differently (`wheelid_core::Timing`, `shared/data/RECORDING_FORMAT.md`):
+//! (a) velocity at t, command from t; (b) velocity averaged over the window ending at t,
+//! command from t; (c) t at the window's middle, the command sent at the window's start. Read
+//! under the wrong convention, a robot seems to answer up to a sample early or late, and a fit
+//! absorbs that into θ1, θ2 (tens of % at robot sample rates). So:
+//!
+//! * a recording that states its convention (metadata `timing`, or the older
+//!   `velocity_sampling`, which meant (a) or (b)) is used as stated — (c) restamped to (b)
+//!   (`wheelid_core::condition::restamp`);
+//! * otherwise the output-error fit estimates, with θ and the initial states, which convention
+//!   the recording follows and a residual offset: each of (a), (b), (c) is a hypothesis
+//!   (velocities instants or window averages; (c) restamped to window ends), fitted with a
+//!   signed command-to-response offset δ ∈ [−1.5 Δ, +1.5 Δ] (`wheelid_models::CommandOffset`:
+//!   the commands act from t_k + δ; a host's clock a fraction of a sample off). The hypothesis
+//!   of highest Gaussian likelihood wins,
+//!
+//!   ```text
+//!   −2 ln L = N Σ_c ln σ̂_c²    (N samples per channel, σ̂_c the residual std of channel c)
+//!   ```
+//!
+//!   with instants handicapped by [`INSTANT_MARGIN`] per residual (encoder odometry reports
+//!   window averages; instants must explain the data clearly better). The report gives the
+//!   convention the fit points at — the winner, moved by its δ where δ ≈ ±Δ turns one window
+//!   reading into the other — and δ with its standard error. An offset none of them explains (a
+//!   latency, a clock offset) is said as such; `wheelid diagnose` models dead times beyond it.
+//!
+//! Non-uniform recordings are fitted on their own stamps: the commands switch and the windows
+//! average where the stamps say, never interpolated onto a grid.
+
+use serde::Serialize;
+use wheelid_core::condition;
+use wheelid_core::{DynamicModel, Recording, SolveError, Timing, VelocitySampling};
+use wheelid_models::CommandOffset;
+use wheelid_solvers::OutputError;
+use wheelid_solvers::oe::OutputErrorFit;
+
+/// Largest offset searched, in sample periods (either sign).
+pub const MAX_OFFSET_SAMPLES: f64 = 1.5;
+
+/// How much lower, per residual, −2 ln L of the instant-sampling hypothesis must be to win
+/// over window averages (about a 1 % smaller residual variance). Encoder odometry reports
+/// window averages; and read with a command lead of Δ/2, instants mimic a window-middle stamp
+/// up to the window's sinc attenuation (second order in ωΔ), which quantisation noise can hide
+/// while it still moves θ1 by ~1 % at the Khepera's 23 ms and 50 Hz.
+pub const INSTANT_MARGIN: f64 = 0.01;
+
+/// Where the timing used by a fit came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TimingSource {
+    /// Every recording states its convention (metadata).
+    Stated,
+    /// Estimated by the fit (no metadata, or some recordings without it).
+    Estimated,
+}
+
+/// The timing a fit used, for the report.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TimingReport {
+    /// Stated or estimated.
+    pub source: TimingSource,
+    /// The stated convention (when every recording states the same one).
+    pub stated: Option<Timing>,
+    /// Output sampling used (stated, or the hypothesis the likelihood chose).
+    pub sampling: VelocitySampling,
+    /// Offset δ [s] under the winning hypothesis: its commands act from t_k + δ (negative:
+    /// before their stamps); 0 when stated.
+    pub offset_s: f64,
+    /// Standard error of δ [s] (0 when stated).
+    pub offset_std_s: f64,
+    /// The median sample period Δ [s] (the longest over the recordings).
+    pub period_s: f64,
+    /// −2 ln L of each convention fitted as a hypothesis (with its own offset), (convention,
+    /// value): the smaller wins (instants with a handicap, [`INSTANT_MARGIN`]).
+    pub hypotheses: Vec<(Timing, f64)>,
+    /// The convention the estimate points at: the hypothesis that won, moved by its offset
+    /// (a window-end reading with δ ≈ −Δ is a window-middle stamp); `None` when δ is within
+    /// max(3σ, 0.1 Δ) of no convention.
+    pub likely: Option<Timing>,
+    /// One sentence for the report.
+    pub summary: String,
+}
+
+/// The output of [`fit_with_timing`]: the fit (θ followed by δ when estimated), the recordings
+/// as fitted (their sampling set), and the report.
+#[derive(Debug, Clone)]
+pub struct TimedFit {
+    /// The output-error fit; when estimated, its θ, standard errors and covariance carry δ as
+    /// the last parameter.
+    pub fit: OutputErrorFit,
+    /// The recordings as they were fitted (restamped, with the chosen output sampling).
+    pub recordings: Vec<Recording>,
+    /// What timing was used.
+    pub timing: TimingReport,
+}
+
+/// Longest median sample period over `recs` [s].
+fn period(recs: &[Recording]) -> f64 {
+    recs.iter()
+        .map(|r| r.sampling().dt_median)
+        .fold(0.0, f64::max)
+}
+
+/// Fits `model` by output error from `theta0` on `recordings` (already restamped), with the
+/// timing stated or estimated (module docs). `oe.bounds`, if set, are the model's θ bounds;
+/// the offset's are added.
+///
+/// # Errors
+/// As [`OutputError::fit`] (every hypothesis failing gives the first hypothesis's error).
+pub fn fit_with_timing(
+    model: &dyn DynamicModel,
+    recordings: &[Recording],
+    theta0: &[f64],
+    oe: &OutputError,
+) -> Result<TimedFit, SolveError> {
+    let dt = period(recordings);
+    let start = physical_start(model, theta0, dt);
+    match fit_from(model, recordings, &start, oe, dt) {
+        Err(_) if start != theta0 => fit_from(model, recordings, theta0, oe, dt),
+        Err(_) if start == theta0 => match fallback(model, theta0, dt) {
+            Some(f) => fit_from(model, recordings, &f, oe, dt),
+            None => fit_from(model, recordings, theta0, oe, dt),
+        },
+        other => other,
+    }
+}
+
+/// `theta0`, or [`fallback`] when its time constants or gains (θ1, θ2, θ4, θ6 of an eq. 2.19
+/// model) are not positive: least squares on badly stamped or jittered data can come out so.
+fn physical_start(model: &dyn DynamicModel, theta0: &[f64], dt: f64) -> Vec<f64> {
+    let sane = six_theta(model) && [0, 1, 3, 5].iter().all(|&i| theta0[i] > 0.0);
+    if sane || !six_theta(model) {
+        return theta0.to_vec();
+    }
+    fallback(model, theta0, dt).unwrap_or_else(|| theta0.to_vec())
+}
+
+/// Whether the model's first six parameters are θ1…θ6 of eq. 2.19.
+fn six_theta(model: &dyn DynamicModel) -> bool {
+    let p = model.params();
+    p.len() >= 6
+        && p.iter()
+            .take(6)
+            .enumerate()
+            .all(|(i, q)| q.name == format!("theta{}", i + 1))
+}
+
+/// Unit gains and time constants of three periods (θ = 3Δ, 3Δ, 0, 1, 0, 1; any further
+/// parameters as in `theta0`), for an eq. 2.19 model.
+fn fallback(model: &dyn DynamicModel, theta0: &[f64], dt: f64) -> Option<Vec<f64>> {
+    six_theta(model).then(|| {
+        let mut f = theta0.to_vec();
+        f[..6].copy_from_slice(&[3.0 * dt, 3.0 * dt, 0.0, 1.0, 0.0, 1.0]);
+        f
+    })
+}
+
+/// [`fit_with_timing`] from one start.
+fn fit_from(
+    model: &dyn DynamicModel,
+    recordings: &[Recording],
+    theta0: &[f64],
+    oe: &OutputError,
+    dt: f64,
+) -> Result<TimedFit, SolveError> {
+    let stated: Vec<Option<Timing>> = recordings.iter().map(Recording::timing).collect();
+    if let Some(first) = stated.first().copied().flatten()
+        && stated.iter().all(Option::is_some)
+    {
+        let fit = oe.fit(model, recordings, theta0)?;
+        let same = stated.iter().all(|s| *s == Some(first));
+        let timing = TimingReport {
+            source: TimingSource::Stated,
+            stated: same.then_some(first),
+            sampling: first.velocity_sampling(),
+            offset_s: 0.0,
+            offset_std_s: 0.0,
+            period_s: dt,
+            hypotheses: Vec::new(),
+            likely: same.then_some(first),
+            summary: format!(
+                "timing: stated ({}), used as stated",
+                if same { first.name() } else { "per recording" }
+            ),
+        };
+        return Ok(TimedFit {
+            fit,
+            recordings: recordings.to_vec(),
+            timing,
+        });
+    }
+    let params = CommandOffset::params_of(model);
+    let wrapped = CommandOffset::new(model, &params)
+        .map_err(|e| SolveError::InvalidProblem(e.to_string()))?;
+    let mut bounds = oe
+        .bounds
+        .clone()
+        .unwrap_or_else(|| vec![(f64::NEG_INFINITY, f64::INFINITY); theta0.len()]);
+    bounds.push((-MAX_OFFSET_SAMPLES * dt, MAX_OFFSET_SAMPLES * dt));
+    let oe7 = OutputError {
+        bounds: Some(bounds),
+        ..oe.clone()
+    };
+    let mut start = theta0.to_vec();
+    start.push(0.0);
+    let mut best: Option<(f64, OutputErrorFit, Vec<Recording>, Timing)> = None;
+    let mut hypotheses = Vec::new();
+    let mut first_err = None;
+    for h in Timing::ALL {
+        let Some(recs) = under(recordings, h)? else {
+            continue;
+        };
+        match oe7.fit(&wrapped, &recs, &start) {
+            Ok(fit) => {
+                let score = neg2_log_likelihood(&fit);
+                hypotheses.push((h, score));
+                // The prior: window averages must merely tie; instants must win clearly.
+                let handicap = match h {
+                    Timing::Instant => INSTANT_MARGIN * fit.residuals as f64,
+                    _ => 0.0,
+                };
+                if best.as_ref().is_none_or(|b| score + handicap < b.0) {
+                    best = Some((score + handicap, fit, recs, h));
+                }
+            }
+            Err(e) => {
+                first_err.get_or_insert(e);
+            }
+        }
+    }
+    let Some((_, fit, recs, h)) = best else {
+        return Err(first_err.unwrap_or_else(|| {
+            SolveError::InvalidProblem("no timing hypothesis could be fitted".into())
+        }));
+    };
+    let timing = estimated_report(&fit, h, dt, hypotheses);
+    Ok(TimedFit {
+        fit,
+        recordings: recs,
+        timing,
+    })
+}
+
+/// The recordings read under convention `h`: those that state theirs keep it; the others get
+/// `h`'s output sampling, restamped to window ends for (c). `None` when a recording states a
+/// sampling that contradicts `h` (then `h` is not a hypothesis of this set).
+fn under(recordings: &[Recording], h: Timing) -> Result<Option<Vec<Recording>>, SolveError> {
+    let mut out = Vec::with_capacity(recordings.len());
+    for r in recordings {
+        if r.timing().is_some() {
+            if r.velocity_sampling() != h.velocity_sampling() {
+                return Ok(None);
+            }
+            out.push(r.clone());
+            continue;
+        }
+        let mut x = r.clone();
+        x.set_timing(h);
+        let x = condition::restamp(&x).map_err(|e| SolveError::InvalidProblem(e.to_string()))?;
+        out.push(x);
+    }
+    Ok(Some(out))
+}
+
+/// −2 ln L of a fit with Gaussian residuals of per-channel variance σ̂_c² (module docs).
+fn neg2_log_likelihood(fit: &OutputErrorFit) -> f64 {
+    let nch = fit.noise_std.len().max(1) as f64;
+    let n = fit.residuals as f64 / nch;
+    fit.noise_std
+        .iter()
+        .map(|s| n * (s * s).max(1e-300).ln())
+        .sum()
+}
+
+/// The convention that hypothesis `h` with residual offset δ amounts to: a window-end reading
+/// with δ ≈ −Δ is a window-middle stamp, and a window-middle reading with δ ≈ +Δ a window-end
+/// one; `None` when δ is within max(3σ, 0.1 Δ) of none.
+fn implied(h: Timing, delta: f64, sd: f64, dt: f64) -> Option<Timing> {
+    let tol = (3.0 * sd).max(0.1 * dt);
+    let candidates: &[(Timing, f64)] = match h {
+        Timing::Instant => &[(Timing::Instant, 0.0)],
+        Timing::WindowEnd => &[(Timing::WindowEnd, 0.0), (Timing::WindowMiddle, -1.0)],
+        Timing::WindowMiddle => &[(Timing::WindowMiddle, 0.0), (Timing::WindowEnd, 1.0)],
+    };
+    candidates
+        .iter()
+        .filter(|(_, at)| (delta - at * dt).abs() <= tol)
+        .min_by(|a, b| {
+            (delta - a.1 * dt)
+                .abs()
+                .total_cmp(&(delta - b.1 * dt).abs())
+        })
+        .map(|(t, _)| *t)
+}
+
+/// The report of an estimated timing, in one sentence.
+fn estimated_report(
+    fit: &OutputErrorFit,
+    h: Timing,
+    dt: f64,
+    hypotheses: Vec<(Timing, f64)>,
+) -> TimingReport {
+    let last = fit.theta.len() - 1;
+    let (delta, sd) = (fit.theta[last], fit.std_err[last]);
+    let likely = implied(h, delta, sd, dt);
+    let verdict = match likely {
+        Some(Timing::Instant) => "velocity at t, command from t (a)".to_string(),
+        Some(Timing::WindowEnd) => {
+            "velocity averaged over the window ending at t, command from t (b)".to_string()
+        }
+        Some(Timing::WindowMiddle) => format!(
+            "stamped at window middle? (c): velocities averaged over the window around t, \
+             commands act {:.1} ms before their stamps",
+            500.0 * dt
+        ),
+        None => format!(
+            "read as {}, the commands act {:.1} ms {} — none of the conventions: a latency or \
+             a clock offset",
+            h.name(),
+            1e3 * delta.abs(),
+            if delta < 0.0 { "early" } else { "late" }
+        ),
+    };
+    TimingReport {
+        source: TimingSource::Estimated,
+        stated: None,
+        sampling: h.velocity_sampling(),
+        offset_s: delta,
+        offset_std_s: sd,
+        period_s: dt,
+        hypotheses,
+        likely,
+        summary: format!(
+            "timing: estimated (no metadata) — {verdict}; fitted as {} with offset \
+             {:+.2} ± {:.2} ms ({:+.2} samples)",
+            h.name(),
+            1e3 * delta,
+            1e3 * sd,
+            delta / dt
+        ),
+    }
+}
