@@ -150,6 +150,9 @@ impl<R: Robot, H> Robot for WithServer<R, H> {
     fn velocity_sampling(&self) -> wheelid_core::VelocitySampling {
         self.robot.velocity_sampling()
     }
+    fn timing(&self) -> Option<wheelid_core::Timing> {
+        self.robot.timing()
+    }
     fn send(&mut self, v_ref: f64, w_ref: f64) -> Result<(f64, f64), RobotError> {
         self.robot.send(v_ref, w_ref)
     }
@@ -648,12 +651,10 @@ pub fn drive(
     rec.phi = Some(phi);
     rec.set_meta("robot", robot.name());
     rec.set_meta("command_hold", "zoh");
-    rec.set_meta(
-        "velocity_sampling",
-        match robot.velocity_sampling() {
-            wheelid_core::VelocitySampling::Instant => "instant",
-            wheelid_core::VelocitySampling::WindowAverage => "window_average",
-        },
-    );
+    // The stamping convention as the backend knows it; unknown stays unsaid, and identification
+    // estimates it.
+    if let Some(timing) = robot.timing() {
+        rec.set_timing(timing);
+    }
     Ok(rec)
 }

@@ -157,6 +157,34 @@ fn fallback(model: &dyn DynamicModel, theta0: &[f64], dt: f64) -> Option<Vec<f64
     })
 }
 
+/// `oe` with the first sample of every window-averaged recording left out of the cost (added
+/// to its mask): that window lies before the recording began, under commands the recording does
+/// not hold, so it is not a residual of the model (one such sample can dominate the residual
+/// variance of a quiet recording and so the choice between conventions).
+fn without_first_windows(oe: &OutputError, recs: &[Recording]) -> OutputError {
+    if recs
+        .iter()
+        .all(|r| r.velocity_sampling() == VelocitySampling::Instant)
+    {
+        return oe.clone();
+    }
+    let mut mask: Vec<Vec<bool>> = match &oe.mask {
+        Some(m) if m.len() == recs.len() => m.clone(),
+        _ => recs.iter().map(|r| vec![true; r.len()]).collect(),
+    };
+    for (m, r) in mask.iter_mut().zip(recs) {
+        if r.velocity_sampling() == VelocitySampling::WindowAverage
+            && let Some(first) = m.first_mut()
+        {
+            *first = false;
+        }
+    }
+    OutputError {
+        mask: Some(mask),
+        ..oe.clone()
+    }
+}
+
 /// [`fit_with_timing`] from one start.
 fn fit_from(
     model: &dyn DynamicModel,
@@ -169,7 +197,7 @@ fn fit_from(
     if let Some(first) = stated.first().copied().flatten()
         && stated.iter().all(Option::is_some)
     {
-        let fit = oe.fit(model, recordings, theta0)?;
+        let fit = without_first_windows(oe, recordings).fit(model, recordings, theta0)?;
         let same = stated.iter().all(|s| *s == Some(first));
         let timing = TimingReport {
             source: TimingSource::Stated,
@@ -212,7 +240,7 @@ fn fit_from(
         let Some(recs) = under(recordings, h)? else {
             continue;
         };
-        match oe7.fit(&wrapped, &recs, &start) {
+        match without_first_windows(&oe7, &recs).fit(&wrapped, &recs, &start) {
             Ok(fit) => {
                 let score = neg2_log_likelihood(&fit);
                 hypotheses.push((h, score));

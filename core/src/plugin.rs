@@ -334,6 +334,9 @@ impl Robot for PanicGuard<dyn Robot> {
     fn velocity_sampling(&self) -> crate::VelocitySampling {
         guarded(|| self.inner.velocity_sampling()).unwrap_or_default()
     }
+    fn timing(&self) -> Option<crate::Timing> {
+        guarded(|| self.inner.timing()).unwrap_or(None)
+    }
     fn send(&mut self, v_ref: f64, w_ref: f64) -> std::result::Result<(f64, f64), RobotError> {
         guarded(|| self.inner.send(v_ref, w_ref)).map_err(RobotError::Setting)?
     }

@@ -126,6 +126,18 @@ pub trait Robot {
         crate::VelocitySampling::Instant
     }
 
+    /// How the robot's reports are stamped ([`crate::Timing`]: (a) instants, (b) window averages
+    /// ending at the report, (c) stamped at the window's middle with the command sent at its
+    /// start), or `None` if the backend cannot know (a log that does not say). A run writes it
+    /// into the recording's metadata. The default follows [`Robot::velocity_sampling`]: (a)
+    /// for instants, (b) for window averages.
+    fn timing(&self) -> Option<crate::Timing> {
+        Some(match self.velocity_sampling() {
+            crate::VelocitySampling::Instant => crate::Timing::Instant,
+            crate::VelocitySampling::WindowAverage => crate::Timing::WindowEnd,
+        })
+    }
+
     /// Stops the robot (zero command) and releases the link; the default sends (0, 0).
     ///
     /// # Errors

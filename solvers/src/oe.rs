@@ -14,9 +14,6 @@
 //! output side: no filter, no derivative, no cut-off, and no errors-in-variables bias (Ljung,
 //! *System Identification*, 2nd ed., §7.3; the output-error model of §4.2).
 //!
-//! The first sample of a recording whose velocities are window averages is left out of the
-//! cost: its window lies before the recording, under commands the recording does not hold.
-//!
 //! **Minimisation.** Levenberg–Marquardt (Moré's MINPACK `lmder`, through the
 //! `levenberg-marquardt` crate), started from a given θ (the least-squares answer). The
 //! Jacobian comes from the model's forward sensitivities when it has them
@@ -541,14 +538,6 @@ impl OutputError {
             }
             None => recordings.iter().map(|r| vec![true; r.len()]).collect(),
         };
-        // A window-averaged first sample averages motion from before the recording began,
-        // driven by commands it does not hold: it is not a residual of this model.
-        let mut mask = mask;
-        for (m, r) in mask.iter_mut().zip(recordings) {
-            if r.velocity_sampling() == wheelid_core::VelocitySampling::WindowAverage {
-                m[0] = false;
-            }
-        }
         // Only the residuals that count are rows of the problem.
         let index: Vec<Vec<usize>> = mask
             .iter()
