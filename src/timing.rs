@@ -343,6 +343,14 @@ fn estimated_report(
              commands act {:.1} ms before their stamps",
             500.0 * dt
         ),
+        None if delta.abs() >= 0.999 * MAX_OFFSET_SAMPLES * dt => format!(
+            "read as {}, the commands act at least {:.1} ms {} (the edge of the ±{} sample \
+             search): a dead time beyond the stamping — `wheelid diagnose` models it",
+            h.name(),
+            1e3 * delta.abs(),
+            if delta < 0.0 { "early" } else { "late" },
+            MAX_OFFSET_SAMPLES
+        ),
         None => format!(
             "read as {}, the commands act {:.1} ms {} — none of the conventions: a latency or \
              a clock offset",
