@@ -28,7 +28,7 @@ use wheelid_core::{
 use wheelid_models::CommandOffset;
 use wheelid_solvers::{InstrumentalVariables, OutputError};
 
-use crate::timing::{TimingReport, TimingSource, fit_with_timing};
+use crate::timing::{TimingReport, fit_with_timing};
 
 /// Errors of an identification run.
 #[derive(Debug, thiserror::Error)]
@@ -392,9 +392,7 @@ pub fn identify(
             std_err = fit.std_err[..p].to_vec();
             bound_state = fit.bound_state[..p].to_vec();
             initial = fit.initial.iter().cloned().map(Some).collect();
-            if timed.timing.source == TimingSource::Estimated {
-                offset = Some(fit.theta[p]);
-            }
+            offset = timed.offset;
             fitted_recordings = timed.recordings;
         }
         noise_std = Some(fit.noise_std.clone());

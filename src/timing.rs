@@ -39,6 +39,11 @@ use wheelid_solvers::oe::OutputErrorFit;
 /// Largest offset searched, in sample periods (either sign).
 pub const MAX_OFFSET_SAMPLES: f64 = 1.5;
 
+/// Smallest residual offset, in sample periods, that is fitted rather than held at zero (and
+/// it must also exceed 3 standard errors): below it unmodelled fast dynamics (a filtered
+/// derivative, a motor's electrical lag) would be traded against θ1, θ2.
+pub const MIN_OFFSET_SAMPLES: f64 = 0.1;
+
 /// How much lower, per residual, −2 ln L of the instant-sampling hypothesis must be to win
 /// over window averages (about a 1 % smaller residual variance). Encoder odometry reports
 /// window averages; and read with a command lead of Δ/2, instants mimic a window-middle stamp
@@ -92,6 +97,8 @@ pub struct TimedFit {
     pub fit: OutputErrorFit,
     /// The recordings as they were fitted (restamped, with the chosen output sampling).
     pub recordings: Vec<Recording>,
+    /// The residual offset δ [s] when it was fitted (then the last entry of `fit.theta`).
+    pub offset: Option<f64>,
     /// What timing was used.
     pub timing: TimingReport,
 }
@@ -217,6 +224,7 @@ fn fit_from(
             fit,
             recordings: recordings.to_vec(),
             timing,
+            offset: None,
         });
     }
     let params = CommandOffset::params_of(model);
@@ -231,8 +239,7 @@ fn fit_from(
         bounds: Some(bounds),
         ..oe.clone()
     };
-    let mut start = theta0.to_vec();
-    start.push(0.0);
+    // 1. Each convention as a hypothesis, its offset pinned at zero: the likeliest wins.
     let mut best: Option<(f64, OutputErrorFit, Vec<Recording>, Timing)> = None;
     let mut hypotheses = Vec::new();
     let mut first_err = None;
@@ -240,7 +247,7 @@ fn fit_from(
         let Some(recs) = under(recordings, h)? else {
             continue;
         };
-        match without_first_windows(&oe7, &recs).fit(&wrapped, &recs, &start) {
+        match without_first_windows(oe, &recs).fit(model, &recs, theta0) {
             Ok(fit) => {
                 let score = neg2_log_likelihood(&fit);
                 hypotheses.push((h, score));
@@ -258,17 +265,40 @@ fn fit_from(
             }
         }
     }
-    let Some((_, fit, recs, h)) = best else {
+    let Some((_, pinned, recs, h)) = best else {
         return Err(first_err.unwrap_or_else(|| {
             SolveError::InvalidProblem("no timing hypothesis could be fitted".into())
         }));
     };
-    let timing = estimated_report(&fit, h, dt, hypotheses);
-    Ok(TimedFit {
-        fit,
-        recordings: recs,
-        timing,
-    })
+    // 2. A residual offset under the winner, used only where it is one.
+    let mut start = pinned.theta.clone();
+    start.push(0.0);
+    let free = without_first_windows(&oe7, &recs)
+        .fit(&wrapped, &recs, &start)
+        .ok();
+    let residual = free.as_ref().map(|f| {
+        let last = f.theta.len() - 1;
+        (f.theta[last], f.std_err[last])
+    });
+    let real = residual.is_some_and(|(d, sd)| d.abs() > (3.0 * sd).max(MIN_OFFSET_SAMPLES * dt));
+    let timing = estimated_report(h, residual, real, dt, hypotheses);
+    match (real, free) {
+        (true, Some(fit)) => {
+            let offset = residual.map(|(d, _)| d);
+            Ok(TimedFit {
+                fit,
+                recordings: recs,
+                timing,
+                offset,
+            })
+        }
+        _ => Ok(TimedFit {
+            fit: pinned,
+            recordings: recs,
+            timing,
+            offset: None,
+        }),
+    }
 }
 
 /// The recordings read under convention `h`: those that state theirs keep it; the others get
@@ -302,79 +332,58 @@ fn neg2_log_likelihood(fit: &OutputErrorFit) -> f64 {
         .sum()
 }
 
-/// The convention that hypothesis `h` with residual offset δ amounts to: a window-end reading
-/// with δ ≈ −Δ is a window-middle stamp, and a window-middle reading with δ ≈ +Δ a window-end
-/// one; `None` when δ is within max(3σ, 0.1 Δ) of none.
-fn implied(h: Timing, delta: f64, sd: f64, dt: f64) -> Option<Timing> {
-    let tol = (3.0 * sd).max(0.1 * dt);
-    let candidates: &[(Timing, f64)] = match h {
-        Timing::Instant => &[(Timing::Instant, 0.0)],
-        Timing::WindowEnd => &[(Timing::WindowEnd, 0.0), (Timing::WindowMiddle, -1.0)],
-        Timing::WindowMiddle => &[(Timing::WindowMiddle, 0.0), (Timing::WindowEnd, 1.0)],
-    };
-    candidates
-        .iter()
-        .filter(|(_, at)| (delta - at * dt).abs() <= tol)
-        .min_by(|a, b| {
-            (delta - a.1 * dt)
-                .abs()
-                .total_cmp(&(delta - b.1 * dt).abs())
-        })
-        .map(|(t, _)| *t)
-}
-
 /// The report of an estimated timing, in one sentence.
 fn estimated_report(
-    fit: &OutputErrorFit,
     h: Timing,
+    residual: Option<(f64, f64)>,
+    real: bool,
     dt: f64,
     hypotheses: Vec<(Timing, f64)>,
 ) -> TimingReport {
-    let last = fit.theta.len() - 1;
-    let (delta, sd) = (fit.theta[last], fit.std_err[last]);
-    let likely = implied(h, delta, sd, dt);
-    let verdict = match likely {
-        Some(Timing::Instant) => "velocity at t, command from t (a)".to_string(),
-        Some(Timing::WindowEnd) => {
+    let verdict = match h {
+        Timing::Instant => "velocity at t, command from t (a)".to_string(),
+        Timing::WindowEnd => {
             "velocity averaged over the window ending at t, command from t (b)".to_string()
         }
-        Some(Timing::WindowMiddle) => format!(
+        Timing::WindowMiddle => format!(
             "stamped at window middle? (c): velocities averaged over the window around t, \
              commands act {:.1} ms before their stamps",
             500.0 * dt
         ),
-        None if delta.abs() >= 0.999 * MAX_OFFSET_SAMPLES * dt => format!(
-            "read as {}, the commands act at least {:.1} ms {} (the edge of the ±{} sample \
-             search): a dead time beyond the stamping — `wheelid diagnose` models it",
-            h.name(),
+    };
+    let (delta, sd) = residual.unwrap_or((0.0, 0.0));
+    let rest = match (residual, real) {
+        (None, _) => "residual offset not fitted".to_string(),
+        (Some(_), false) => format!(
+            "residual offset {:+.2} ± {:.2} ms ({:+.3} samples) not significant, held at 0",
+            1e3 * delta,
+            1e3 * sd,
+            delta / dt
+        ),
+        (Some(_), true) if delta.abs() >= 0.999 * MAX_OFFSET_SAMPLES * dt => format!(
+            "and the commands act at least {:.1} ms {} (the edge of the ±{} sample search): a \
+             dead time beyond the stamping — `wheelid diagnose` models it",
             1e3 * delta.abs(),
             if delta < 0.0 { "early" } else { "late" },
             MAX_OFFSET_SAMPLES
         ),
-        None => format!(
-            "read as {}, the commands act {:.1} ms {} — none of the conventions: a latency or \
-             a clock offset",
-            h.name(),
-            1e3 * delta.abs(),
-            if delta < 0.0 { "early" } else { "late" }
+        (Some(_), true) => format!(
+            "plus an offset of {:+.2} ± {:.2} ms ({:+.2} samples): a latency or a clock offset, \
+             fitted",
+            1e3 * delta,
+            1e3 * sd,
+            delta / dt
         ),
     };
     TimingReport {
         source: TimingSource::Estimated,
         stated: None,
         sampling: h.velocity_sampling(),
-        offset_s: delta,
+        offset_s: if real { delta } else { 0.0 },
         offset_std_s: sd,
         period_s: dt,
         hypotheses,
-        likely,
-        summary: format!(
-            "timing: estimated (no metadata) — {verdict}; fitted as {} with offset \
-             {:+.2} ± {:.2} ms ({:+.2} samples)",
-            h.name(),
-            1e3 * delta,
-            1e3 * sd,
-            delta / dt
-        ),
+        likely: Some(h),
+        summary: format!("timing: estimated (no metadata) — {verdict}; {rest}"),
     }
 }

@@ -5,12 +5,16 @@
 //! (the figure eights of Appendix A), [`simulator`] (the simulated robot of eq. 2.19, with an
 //! encoder measurement model) [`effects`] (the physics the 6-θ model leaves out), [`control`] (the kinematic,
 //! inverse-dynamics and adaptive controllers of chapters 3–4) and [`tracking`] (the closed loop).
+//! [`physics`] is an independent rigid-body robot (rapier3d-f64: motors, PD loops, wheel
+//! contacts, a host that stamps its rows by any of the three conventions) to prove the methods
+//! on physics eq. 2.19 did not write.
 
 pub mod control;
 pub mod effects;
 pub mod excitation;
 pub mod khepera;
 pub mod link;
+pub mod physics;
 pub mod pioneer;
 pub mod profile;
 pub mod replay;

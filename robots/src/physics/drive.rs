@@ -1,0 +1,90 @@
+//! The drive: onboard controller, amplifier and DC motors, run at the physics step.
+//!
+//! Per wheel i (0 right, 1 left), with ω_i its spin rate relative to the chassis:
+//!
+//! ```text
+//! wheel-PD (§2.2):  u_i = k_P (ω_i,ref − ω_i) − k_D ω̇_i,   ω_r,l,ref = (v_ref ± d ω_ref/2)/r
+//! v/ω-PD (A.3):     u_r,l = [K_PT (v_ref − v) − K_DT v̇] ± [K_PR (ω_ref − ω) − K_DR ω̇],
+//!                   v = r (ω_r + ω_l)/2,  ω = r (ω_r − ω_l)/d
+//! motor (2.9–2.10): τ_i = (k_a/R_a)(u_i − k_b ω_i) − B_e ω_i       (torque on the wheel)
+//! ```
+//!
+//! The derivatives are backward differences at the physics step through a first-order filter
+//! of time constant [`DERIVATIVE_FILTER_STEPS`] steps, as an embedded controller computes
+//! them: unfiltered, the derivative term is an explicit negative inertia that makes a wheel
+//! with no load (slipping, lifted) unstable whenever (k_a/R_a)·k_D exceeds its spin inertia; the
+//! filter turns its high-frequency part into damping (stable for k_D (k_a/R_a) h/(T_f I_e) < 2)
+//! and lags it by T_f ≪ the robot's time constants.
+
+use super::profile::{Controller, PhysicalProfile};
+
+/// Time constant of the derivative filter, in physics steps.
+pub const DERIVATIVE_FILTER_STEPS: f64 = 5.0;
+
+/// Controller and motor state of both wheels.
+#[derive(Debug, Clone)]
+pub struct Drive {
+    p: PhysicalProfile,
+    /// The differentiated quantities at the last step (wheel rates, or v and ω).
+    last: Option<[f64; 2]>,
+    /// Their filtered derivatives.
+    rate: [f64; 2],
+}
+
+impl Drive {
+    /// A drive at rest for profile `p`.
+    pub fn new(p: &PhysicalProfile) -> Self {
+        Self {
+            p: p.clone(),
+            last: None,
+            rate: [0.0; 2],
+        }
+    }
+
+    /// Filtered derivatives of `x` over one step of `h` seconds.
+    fn derivative(&mut self, x: [f64; 2], h: f64) -> [f64; 2] {
+        if let Some(prev) = self.last {
+            let a = h / (DERIVATIVE_FILTER_STEPS * h + h);
+            for i in 0..2 {
+                let raw = (x[i] - prev[i]) / h;
+                self.rate[i] += a * (raw - self.rate[i]);
+            }
+        }
+        self.last = Some(x);
+        self.rate
+    }
+
+    /// Controller voltages (right, left) [V] for the setpoints (v_ref [m/s], ω_ref [rad/s]) and
+    /// the wheel rates (right, left) [rad/s], one step of `h` seconds after the last call.
+    pub fn voltages(&mut self, setpoint: (f64, f64), rates: [f64; 2], h: f64) -> [f64; 2] {
+        let (r, d) = (self.p.r, self.p.d);
+        let (v_ref, w_ref) = setpoint;
+        match self.p.controller {
+            Controller::WheelPd { k_p, k_d } => {
+                let refs = [(v_ref + d * w_ref / 2.0) / r, (v_ref - d * w_ref / 2.0) / r];
+                let acc = self.derivative(rates, h);
+                [0, 1].map(|i| k_p * (refs[i] - rates[i]) - k_d * acc[i])
+            }
+            Controller::VwPd {
+                k_pt,
+                k_dt,
+                k_pr,
+                k_dr,
+            } => {
+                let v = r * (rates[0] + rates[1]) / 2.0;
+                let w = r * (rates[0] - rates[1]) / d;
+                let [dv, dw] = self.derivative([v, w], h);
+                let common = k_pt * (v_ref - v) - k_dt * dv;
+                let diff = k_pr * (w_ref - w) - k_dr * dw;
+                [common + diff, common - diff]
+            }
+        }
+    }
+
+    /// Motor torques (right, left) [N·m] on the wheels from the amplifier's output voltages
+    /// `u` [V] and the wheel rates [rad/s] (eq. 2.9–2.10).
+    pub fn torques(&self, u: [f64; 2], rates: [f64; 2]) -> [f64; 2] {
+        let p = &self.p;
+        [0, 1].map(|i| p.k_a / p.r_a * (u[i] - p.k_b * rates[i]) - p.b_e * rates[i])
+    }
+}

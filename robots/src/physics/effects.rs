@@ -1,0 +1,128 @@
+//! Effects realised where they act on a robot — on the host's commands, inside the onboard
+//! controller, at the amplifier, in the wheel joints, at the floor — never as edits of
+//! eq. 2.19. All off by default; in TOML one table each, e.g. `[effects.voltage_clamp]`.
+//!
+//! | effect | where | what it does |
+//! | --- | --- | --- |
+//! | `latency_s` | host → robot link | a command reaches the controller `latency_s` after it was sent |
+//! | `rate_limit` | onboard setpoint | v and ω setpoints move toward the command at most `v_accel`, `w_accel` per second (Pioneer TransAccel/RotAccel) |
+//! | `voltage_clamp` | amplifier | each wheel's voltage is clamped to ±`volts`; back-EMF still acts |
+//! | `gain_sag` | amplifier (battery) | output voltage × (1 − `fraction` · t/T) over the run |
+//! | `amp_gain_right` | right amplifier | its voltage × the factor (one amplifier off by a few %) |
+//! | `dry_friction_nm` | wheel joints | Coulomb torque −F·sign(ω_i) (smoothed over 0.01 rad/s) |
+//! | `floor_mu` | floor contact | wheel–floor friction (low: the wheels slip; encoders see the wheels) |
+
+use serde::{Deserialize, Serialize};
+use wheelid_core::{Error, Result};
+
+/// The setpoint rate limit (onboard, on the v and ω setpoints).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RateLimit {
+    /// Largest forward acceleration of the setpoint [m/s²].
+    pub v_accel: f64,
+    /// Largest angular acceleration of the setpoint [rad/s²].
+    pub w_accel: f64,
+}
+
+/// The physics the 6-θ model leaves out, realised where it acts (module docs).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PhysicsEffects {
+    /// Command latency from host to controller [s].
+    pub latency_s: Option<f64>,
+    /// Onboard setpoint rate limiter.
+    pub rate_limit: Option<RateLimit>,
+    /// Amplifier voltage clamp, per wheel [V].
+    pub voltage_clamp: Option<f64>,
+    /// Drive-gain sag: fraction of the amplifier gain lost, linearly, by the end of the run.
+    pub gain_sag: Option<f64>,
+    /// Right amplifier's gain relative to the left's (e.g. 0.95).
+    pub amp_gain_right: Option<f64>,
+    /// Coulomb friction torque in each wheel joint [N·m].
+    pub dry_friction_nm: Option<f64>,
+    /// Wheel–floor friction coefficient (default 1).
+    pub floor_mu: Option<f64>,
+}
+
+impl PhysicsEffects {
+    /// Names of the effects that are on.
+    pub fn active(&self) -> Vec<&'static str> {
+        let mut v = Vec::new();
+        let on = [
+            ("latency", self.latency_s.is_some()),
+            ("rate_limit", self.rate_limit.is_some()),
+            ("voltage_clamp", self.voltage_clamp.is_some()),
+            ("gain_sag", self.gain_sag.is_some()),
+            ("amp_gain_right", self.amp_gain_right.is_some()),
+            ("dry_friction", self.dry_friction_nm.is_some()),
+            ("floor_mu", self.floor_mu.is_some()),
+        ];
+        for (name, is) in on {
+            if is {
+                v.push(name);
+            }
+        }
+        v
+    }
+
+    /// Checks every value.
+    ///
+    /// # Errors
+    /// [`Error::InvalidSetting`] naming the effect whose value is out of range.
+    pub fn validate(&self) -> Result<()> {
+        let check = |name: &str, x: Option<f64>, ok: &dyn Fn(f64) -> bool| match x {
+            Some(x) if !(x.is_finite() && ok(x)) => Err(Error::InvalidSetting(format!(
+                "physics effect {name} = {x} is out of range"
+            ))),
+            _ => Ok(()),
+        };
+        check("latency_s", self.latency_s, &|x| x >= 0.0)?;
+        check("voltage_clamp", self.voltage_clamp, &|x| x > 0.0)?;
+        check("gain_sag", self.gain_sag, &|x| (0.0..1.0).contains(&x))?;
+        check("amp_gain_right", self.amp_gain_right, &|x| x > 0.0)?;
+        check("dry_friction_nm", self.dry_friction_nm, &|x| x >= 0.0)?;
+        check("floor_mu", self.floor_mu, &|x| x > 0.0)?;
+        if let Some(r) = self.rate_limit {
+            check("rate_limit.v_accel", Some(r.v_accel), &|x| x > 0.0)?;
+            check("rate_limit.w_accel", Some(r.w_accel), &|x| x > 0.0)?;
+        }
+        Ok(())
+    }
+
+    /// The setpoint after the rate limiter, one step of `h` seconds from `prev` toward `cmd`.
+    pub fn limit_rate(&self, prev: (f64, f64), cmd: (f64, f64), h: f64) -> (f64, f64) {
+        match self.rate_limit {
+            None => cmd,
+            Some(r) => {
+                let step = |p: f64, c: f64, a: f64| p + (c - p).clamp(-a * h, a * h);
+                (
+                    step(prev.0, cmd.0, r.v_accel),
+                    step(prev.1, cmd.1, r.w_accel),
+                )
+            }
+        }
+    }
+
+    /// The amplifier's output voltages for the controller's `u` at fraction `progress` ∈ [0, 1]
+    /// of the run: gain sag, right-amplifier gain, clamp.
+    pub fn amplify(&self, u: [f64; 2], progress: f64) -> [f64; 2] {
+        let sag = 1.0 - self.gain_sag.unwrap_or(0.0) * progress;
+        let gains = [self.amp_gain_right.unwrap_or(1.0) * sag, sag];
+        [0, 1].map(|i| {
+            let x = u[i] * gains[i];
+            match self.voltage_clamp {
+                Some(c) => x.clamp(-c, c),
+                None => x,
+            }
+        })
+    }
+
+    /// Dry-friction torques (right, left) [N·m] on the wheels at their rates [rad/s].
+    pub fn friction(&self, rates: [f64; 2]) -> [f64; 2] {
+        match self.dry_friction_nm {
+            None => [0.0; 2],
+            Some(f) => rates.map(|w| -f * (w / 0.01).tanh()),
+        }
+    }
+}
