@@ -9,22 +9,24 @@
 //! * a recording that states its convention (metadata `timing`, or the older
 //!   `velocity_sampling`, which meant (a) or (b)) is used as stated — (c) restamped to (b)
 //!   (`wheelid_core::condition::restamp`);
-//! * otherwise the output-error fit estimates, with θ and the initial states, which convention
-//!   the recording follows and a residual offset: each of (a), (b), (c) is a hypothesis
-//!   (velocities instants or window averages; (c) restamped to window ends), fitted with a
-//!   signed command-to-response offset δ ∈ [−1.5 Δ, +1.5 Δ] (`wheelid_models::CommandOffset`:
-//!   the commands act from t_k + δ; a host's clock a fraction of a sample off). The hypothesis
-//!   of highest Gaussian likelihood wins,
+//! * otherwise the output-error fit finds which convention the recording follows, in two
+//!   stages. (1) Each of (a), (b), (c) is a hypothesis — velocities instants or window
+//!   averages, (c) restamped to window ends — fitted with θ and the initial states; the
+//!   hypothesis of highest Gaussian likelihood wins,
 //!
 //!   ```text
 //!   −2 ln L = N Σ_c ln σ̂_c²    (N samples per channel, σ̂_c the residual std of channel c)
 //!   ```
 //!
 //!   with instants handicapped by [`INSTANT_MARGIN`] per residual (encoder odometry reports
-//!   window averages; instants must explain the data clearly better). The report gives the
-//!   convention the fit points at — the winner, moved by its δ where δ ≈ ±Δ turns one window
-//!   reading into the other — and δ with its standard error. An offset none of them explains (a
-//!   latency, a clock offset) is said as such; `wheelid diagnose` models dead times beyond it.
+//!   window averages; instants must explain the data clearly better). (2) Under the winner, a
+//!   signed residual offset δ ∈ [−1.5 Δ, +1.5 Δ] (`wheelid_models::CommandOffset`: the
+//!   commands act from t_k + δ — a latency, a host clock off by part of a sample) is fitted,
+//!   and kept only if it exceeds both 3 standard errors and [`MIN_OFFSET_SAMPLES`] of a
+//!   sample: a free δ trades against θ1, θ2 and would absorb unmodelled fast dynamics (on the
+//!   physics backend's Pioneer, a free δ of −5 ms moved θ1 by 1.5 %). The report names the
+//!   convention and the residual offset; one at the edge of the search is a dead time for
+//!   `wheelid diagnose`.
 //!
 //! Non-uniform recordings are fitted on their own stamps: the commands switch and the windows
 //! average where the stamps say, never interpolated onto a grid.
@@ -70,19 +72,17 @@ pub struct TimingReport {
     pub stated: Option<Timing>,
     /// Output sampling used (stated, or the hypothesis the likelihood chose).
     pub sampling: VelocitySampling,
-    /// Offset δ [s] under the winning hypothesis: its commands act from t_k + δ (negative:
-    /// before their stamps); 0 when stated.
+    /// Residual offset δ [s] under the winning hypothesis, when fitted and kept: its commands
+    /// act from t_k + δ (negative: before their stamps); 0 when stated or not significant.
     pub offset_s: f64,
-    /// Standard error of δ [s] (0 when stated).
+    /// Standard error of the fitted residual offset [s] (0 when stated).
     pub offset_std_s: f64,
     /// The median sample period Δ [s] (the longest over the recordings).
     pub period_s: f64,
     /// −2 ln L of each convention fitted as a hypothesis (with its own offset), (convention,
     /// value): the smaller wins (instants with a handicap, [`INSTANT_MARGIN`]).
     pub hypotheses: Vec<(Timing, f64)>,
-    /// The convention the estimate points at: the hypothesis that won, moved by its offset
-    /// (a window-end reading with δ ≈ −Δ is a window-middle stamp); `None` when δ is within
-    /// max(3σ, 0.1 Δ) of no convention.
+    /// The convention the data point at: the stated one, or the hypothesis that won.
     pub likely: Option<Timing>,
     /// One sentence for the report.
     pub summary: String,
