@@ -110,6 +110,10 @@ pub struct SimulateConfig {
     /// Duration, seed, sub-steps, encoder model, effects.
     #[serde(default)]
     pub simulation: SimSettings,
+    /// The physics backend's settings (`--backend physics`): duration, seed, stamping
+    /// convention, jitter, encoders, noise, effects.
+    #[serde(default)]
+    pub physics: wheelid_robots::physics::PhysicsSettings,
 }
 
 /// `wheelid track --config FILE`.

@@ -55,9 +55,21 @@ struct SimulateArgs {
     /// the flags below override it.
     #[arg(long)]
     config: Option<PathBuf>,
-    /// Built-in robot.
-    #[arg(long, value_parser = RobotProfile::NAMES)]
+    /// Built-in robot (simulator: pioneer3dx, pioneer3dx_laut, khepera3; physics: pioneer3dx,
+    /// khepera3, burger).
+    #[arg(long)]
     robot: Option<String>,
+    /// Backend: `simulator` (eq. 2.19 with encoders and effects) or `physics` (the independent
+    /// rigid-body robot of `wheelid_robots::physics`; its settings from `[physics]` in the
+    /// config).
+    #[arg(long, value_parser = ["simulator", "physics"], default_value = "simulator")]
+    backend: String,
+    /// Physics backend: how the host stamps its rows (instant, window_end, window_middle).
+    #[arg(long, value_parser = ["instant", "window_end", "window_middle"])]
+    timing: Option<String>,
+    /// Physics backend: host jitter as a fraction of the period (uniform ±).
+    #[arg(long)]
+    jitter: Option<f64>,
     /// Excitation preset: thesis (the thesis's signal for the robot), regression (§4.2), or
     /// multisine (random-phase multisines up to 2 Hz, seeded by --seed).
     #[arg(long, value_parser = ["thesis", "regression", "multisine"])]
@@ -146,11 +158,90 @@ fn run_run(a: RunArgs) -> Result<()> {
     Ok(())
 }
 
+/// `wheelid simulate --backend physics`: the rigid-body robot under a random multisine (or the
+/// config's excitation), written as CSV or a bag.
+fn run_simulate_physics(a: &SimulateArgs, cfg: &SimulateConfig) -> Result<()> {
+    use wheelid::robots::physics::{PhysicalProfile, simulate_physics_recording};
+    let name = a.robot.as_deref().unwrap_or("khepera3");
+    let profile = PhysicalProfile::by_name(name).with_context(|| {
+        format!(
+            "unknown physical profile `{name}` (known: {})",
+            PhysicalProfile::NAMES.join(", ")
+        )
+    })?;
+    let mut s = cfg.physics.clone();
+    if let Some(d) = a.duration {
+        s.duration_s = d;
+    }
+    if let Some(seed) = a.seed {
+        s.seed = seed;
+    }
+    if a.exact {
+        s.encoders = false;
+    }
+    if let Some(t) = a.timing.as_deref().and_then(wheelid_core::Timing::parse) {
+        s.timing = t;
+    }
+    if let Some(j) = a.jitter {
+        s.jitter = j;
+    }
+    let th = profile.theta();
+    let f_max =
+        (1.5 / (2.0 * std::f64::consts::PI * th[0].max(th[1]))).clamp(0.2, 0.2 / profile.period_s);
+    let excitation = match (a.excitation.as_deref(), &cfg.excitation) {
+        (None, Some(e)) => e.clone(),
+        _ => ExcitationConfig::RandomMultisine {
+            seed: s.seed,
+            v_offset: 0.1 * profile.v_max,
+            v_amp: 0.3 * profile.v_max,
+            w_amp: 0.35 * profile.w_max,
+            f_max_hz: f_max,
+        },
+    };
+    let rec = simulate_physics_recording(&profile, &excitation.build()?, &s)?;
+    write_recording(&rec, &a.out)?;
+    println!(
+        "{} samples ({:.1} s of the physics {} at {} s, timing {}) written to {}",
+        rec.len(),
+        s.duration_s,
+        profile.name,
+        profile.period_s,
+        s.timing.name(),
+        a.out.display()
+    );
+    Ok(())
+}
+
+/// Writes `rec` as CSV, or as a ROS 2 bag for a `.mcap` path.
+fn write_recording(rec: &wheelid_core::Recording, out: &std::path::Path) -> Result<()> {
+    if out.extension().is_some_and(|e| e == "mcap") {
+        wheelid::robots::replay::write_mcap(
+            rec,
+            out,
+            &wheelid::robots::replay::BagTopics::default(),
+        )?;
+    } else {
+        rec.write_csv(out)?;
+    }
+    Ok(())
+}
+
 fn run_simulate(a: SimulateArgs) -> Result<()> {
     let cfg: SimulateConfig = match &a.config {
         Some(p) => read_toml(p)?,
         None => SimulateConfig::default(),
     };
+    if a.backend == "physics" {
+        return run_simulate_physics(&a, &cfg);
+    }
+    if let Some(r) = a.robot.as_deref()
+        && !RobotProfile::NAMES.contains(&r)
+    {
+        anyhow::bail!(
+            "unknown robot `{r}` for the simulator (known: {})",
+            RobotProfile::NAMES.join(", ")
+        );
+    }
     let robot = robot_profile(
         a.robot.as_deref(),
         cfg.robot.as_deref(),
@@ -182,16 +273,8 @@ fn run_simulate(a: SimulateArgs) -> Result<()> {
             .unwrap_or_else(|| ExcitationConfig::for_robot(&robot)),
     };
     let rec = simulate_recording(&robot, &excitation.build()?, &sim)?;
-    if a.out.extension().is_some_and(|e| e == "mcap") {
-        // A ROS 2 bag: /cmd_vel (geometry_msgs/Twist) and /odom (nav_msgs/Odometry).
-        wheelid::robots::replay::write_mcap(
-            &rec,
-            &a.out,
-            &wheelid::robots::replay::BagTopics::default(),
-        )?;
-    } else {
-        rec.write_csv(&a.out)?;
-    }
+    // CSV, or a ROS 2 bag: /cmd_vel (geometry_msgs/Twist) and /odom (nav_msgs/Odometry).
+    write_recording(&rec, &a.out)?;
     println!(
         "{} samples ({:.1} s of {} at {} s) written to {}",
         rec.len(),

@@ -51,6 +51,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use serde::Deserialize;
 use wheelid_core::{ConditionSettings, Recording, RegressorModel, Robot, RobotError, Solver};
 use wheelid_robots::khepera::{Khepera, KheperaServer, KheperaSettings};
+use wheelid_robots::physics::{PhysicalProfile, PhysicsRobot, PhysicsSettings};
 use wheelid_robots::pioneer::{ArcosServer, Pioneer, PioneerSettings};
 use wheelid_robots::replay::{Replay, ReplaySettings};
 use wheelid_robots::{RobotProfile, SimRobot, SimSettings};
@@ -64,6 +65,8 @@ use crate::plugins::{BuiltIn, Plugins};
 pub struct RunContext<'a> {
     /// The configuration file's directory.
     pub base: &'a Path,
+    /// The run's duration [s] (`duration_s`, default 150 s), for backends that plan ahead.
+    pub duration_s: f64,
 }
 
 /// A built-in robot backend's config table (`[robot] type = "…"`).
@@ -97,7 +100,7 @@ pub trait SolverSpec: Debug {
 }
 
 /// The built-in robot types.
-pub const ROBOT_TYPES: [&str; 4] = ["simulator", "replay", "pioneer", "khepera"];
+pub const ROBOT_TYPES: [&str; 5] = ["simulator", "physics", "replay", "pioneer", "khepera"];
 /// The built-in model types.
 pub const MODEL_TYPES: [&str; 2] = ["vw-pd", "wheel-pd"];
 /// The built-in solver types.
@@ -122,6 +125,42 @@ impl RobotSpec for SimulatorSpec {
     fn connect(&self, _: &RunContext<'_>) -> Result<Box<dyn Robot>> {
         let profile = robot_profile(None, self.robot.as_deref(), self.profile.as_ref())?;
         Ok(Box::new(SimRobot::new(&profile, &self.simulation)?))
+    }
+}
+
+/// `[robot] type = "physics"`: the independent rigid-body robot (`wheelid_robots::physics`).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PhysicsSpec {
+    /// Built-in physical profile name (`pioneer3dx`, `khepera3`, `burger`; default `khepera3`).
+    pub robot: Option<String>,
+    /// A whole physical profile instead.
+    pub profile: Option<PhysicalProfile>,
+    /// Seed, stamping convention, jitter, encoders, noise, effects (`duration_s` is the run's).
+    #[serde(default)]
+    pub physics: PhysicsSettings,
+}
+
+#[typetag::deserialize(name = "physics")]
+impl RobotSpec for PhysicsSpec {
+    fn connect(&self, cx: &RunContext<'_>) -> Result<Box<dyn Robot>> {
+        let profile = match (&self.profile, self.robot.as_deref()) {
+            (Some(p), _) => p.clone(),
+            (None, name) => {
+                let name = name.unwrap_or("khepera3");
+                PhysicalProfile::by_name(name).with_context(|| {
+                    format!(
+                        "unknown physical profile `{name}` (known: {})",
+                        PhysicalProfile::NAMES.join(", ")
+                    )
+                })?
+            }
+        };
+        let settings = PhysicsSettings {
+            duration_s: cx.duration_s,
+            ..self.physics.clone()
+        };
+        Ok(Box::new(PhysicsRobot::new(&profile, &settings)?))
     }
 }
 
@@ -453,7 +492,10 @@ pub fn run(path: &Path, progress: bool) -> Result<RunOutput> {
     let file: RunFile = toml::from_str(&text)
         .map_err(|e| anyhow!("{}: {}", path.display(), toml_msg(&text, &e)))?;
     let base = path.parent().unwrap_or(Path::new(""));
-    let cx = RunContext { base };
+    let cx = RunContext {
+        base,
+        duration_s: file.duration_s.unwrap_or(150.0),
+    };
     // Plugins first: they may provide any of the three.
     let mut plugins = Plugins::default();
     let builtin = BuiltIn {

@@ -128,10 +128,10 @@ fn khepera_identifies_under_every_convention_without_metadata() {
     conventions_identify("khepera3", 1.0);
 }
 
-/// The goal is 1 %; the Pioneer-like robot does not meet it yet: with ±10 % jitter
-/// under (a) θ2 is −1.47 % and θ6 +1.0 % (150 s; noise-free and un-jittered runs stay within
-/// 0.93 %). Its yaw channel trades θ5 against θ6 through the mean forward speed, and the physics
-/// has a v·ω coupling the map's θ5 does not match (θ5 off by 5–35 % by seed). Guarded at 2 %.
+/// The goal is 1 %; the Pioneer-like robot does not meet it yet: θ6 reaches +1.13 %
+/// and θ4 +0.75 % under (b) and (c) (150 s; θ1, θ2 stay within 0.7 %). Its yaw channel trades
+/// θ5 against θ6 through the mean forward speed, and the physics has a v·ω coupling the map's
+/// θ5 does not match (θ5 off by 5–35 % by seed and excitation). Guarded at 2 %.
 #[test]
 fn pioneer_identifies_under_every_convention_without_metadata() {
     conventions_identify("pioneer3dx", 2.0);

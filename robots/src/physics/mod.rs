@@ -37,7 +37,9 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
-use wheelid_core::{Error, Recording, Result, Timing};
+use wheelid_core::{
+    Error, Odometry, Pose, Recording, Result, Robot, RobotError, Timing, VelocitySampling,
+};
 
 use crate::excitation::Excitation;
 use drive::Drive;
@@ -112,82 +114,215 @@ fn sample_steps(n: usize, period: f64, h: f64, jitter: f64, rng: &mut ChaCha8Rng
     out
 }
 
-/// Runs the robot under `excitation` from rest and returns what the host saw at each sample.
-fn run_host(p: &PhysicalProfile, exc: &Excitation, s: &PhysicsSettings) -> Vec<Raw> {
-    let h = p.physics_step_s;
-    let fx = &s.effects;
-    let mut engine = Engine::new(p, fx.floor_mu.unwrap_or(FLOOR_MU));
-    let mut drive = Drive::new(p);
-    let mut rng = ChaCha8Rng::seed_from_u64(s.seed);
-    let n = (s.duration_s / p.period_s).floor() as usize + 2;
-    let steps = sample_steps(n, p.period_s, h, s.jitter, &mut rng);
-    let total = steps.last().copied().unwrap_or(0);
-    let tick = 2.0 * std::f64::consts::PI / p.ticks_per_rev;
-    let latency = fx.latency_s.unwrap_or(0.0);
-    // Commands in flight: (time they reach the controller, command).
-    let mut queue: std::collections::VecDeque<(f64, (f64, f64))> = Default::default();
-    let mut command = (0.0, 0.0);
-    let mut setpoint = (0.0, 0.0);
-    let mut angle = [0.0; 2];
-    let mut rates = engine.wheel_rates();
-    let mut raws = Vec::with_capacity(n);
-    let mut next = 0;
-    for j in 0..=total {
-        let t = j as f64 * h;
-        if next < steps.len() && steps[next] == j {
-            let u = exc.at(t);
-            queue.push_back((t + latency, u));
-            let body = engine.body();
-            let reported = if s.encoders {
-                angle.map(|a| (a / tick).floor() * tick)
-            } else {
-                angle
-            };
-            raws.push(Raw {
-                t,
-                command: u,
-                angle: reported,
-                rate: rates,
-                pose: [body.x, body.y, body.heading],
-            });
-            next += 1;
-        }
-        if j == total {
-            break;
-        }
-        while queue.front().is_some_and(|(at, _)| *at <= t + 0.5 * h) {
-            if let Some((_, u)) = queue.pop_front() {
-                command = u;
-            }
-        }
-        setpoint = fx.limit_rate(setpoint, command, h);
-        let u = drive.voltages(setpoint, rates, h);
-        let u = fx.amplify(u, t / s.duration_s.max(h));
-        let tau = drive.torques(u, rates);
-        let fr = fx.friction(rates);
-        engine.step([tau[0] + fr[0], tau[1] + fr[1]]);
-        let new = engine.wheel_rates();
-        for i in 0..2 {
-            angle[i] += 0.5 * h * (rates[i] + new[i]);
-        }
-        rates = new;
-    }
-    raws
+/// The physics robot as a host drives it: sample, send, advance to the next sample instant.
+///
+/// As a [`Robot`] (read, then send): `read` reports at the current sample instant — v, ω from
+/// the wheels, instants under (a), window averages since the last report under (b) and (c)
+/// (through the trait a report cannot wait for the window after the command, so a run records
+/// (c) as (b): [`Robot::timing`] says which); `send` queues the command (after the latency
+/// effect) and advances the physics to the next sample instant. The clock is the simulation's.
+pub struct PhysicsRobot {
+    p: PhysicalProfile,
+    s: PhysicsSettings,
+    engine: Engine,
+    drive: Drive,
+    steps: Vec<usize>,
+    /// Index of the current sample instant in `steps`, and the current physics step.
+    k: usize,
+    j: usize,
+    queue: std::collections::VecDeque<(f64, (f64, f64))>,
+    command: (f64, f64),
+    setpoint: (f64, f64),
+    angle: [f64; 2],
+    rates: [f64; 2],
+    /// Reported wheel angles at the last read (for window averages) and its time.
+    last_read: Option<(f64, [f64; 2])>,
+    noise: Option<(ChaCha8Rng, Normal<f64>)>,
 }
 
-/// Simulates `profile` under `excitation` from rest and returns the recording the host writes
-/// under `settings.timing` (module docs). Metadata: `robot`, `source`, `theta_map` (the map's
-/// θ of the constants), `model` (`wheel-pd` or `vw-pd`), `effects`, `command_hold: zoh`,
-/// `timing` and `velocity_sampling`.
-///
-/// # Errors
-/// [`Error::InvalidSetting`] for a bad profile or setting (duration ≤ 0, jitter ∉ [0, 0.5),
-/// negative noise, an effect out of range), or an invalid recording (the engine diverged).
-pub fn simulate_physics_recording(
-    profile: &PhysicalProfile,
-    excitation: &Excitation,
-    s: &PhysicsSettings,
-) -> Result<Recording> {
+impl std::fmt::Debug for PhysicsRobot {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("PhysicsRobot")
+            .field("profile", &self.p.name)
+            .field("t", &self.time())
+            .finish_non_exhaustive()
+    }
+}
+
+impl PhysicsRobot {
+    /// The robot at rest at the origin; sample instants for `s.duration_s` (a robot driven by
+    /// `wheelid run` longer than that keeps sampling at the nominal period).
+    ///
+    /// # Errors
+    /// [`Error::InvalidSetting`] for a bad profile or settings (see
+    /// [`simulate_physics_recording`]).
+    pub fn new(p: &PhysicalProfile, s: &PhysicsSettings) -> Result<Self> {
+        validate(p, s)?;
+        let engine = Engine::new(p, s.effects.floor_mu.unwrap_or(FLOOR_MU));
+        let mut rng = ChaCha8Rng::seed_from_u64(s.seed);
+        let n = (s.duration_s / p.period_s).floor() as usize + 2;
+        let steps = sample_steps(n, p.period_s, p.physics_step_s, s.jitter, &mut rng);
+        let noise = (s.wheel_noise_std > 0.0)
+            .then(|| Normal::new(0.0, s.wheel_noise_std).ok())
+            .flatten()
+            .map(|n| (ChaCha8Rng::seed_from_u64(s.seed.wrapping_add(0x5eed)), n));
+        let rates = engine.wheel_rates();
+        Ok(Self {
+            p: p.clone(),
+            s: s.clone(),
+            drive: Drive::new(p),
+            engine,
+            steps,
+            k: 0,
+            j: 0,
+            queue: Default::default(),
+            command: (0.0, 0.0),
+            setpoint: (0.0, 0.0),
+            angle: [0.0; 2],
+            rates,
+            last_read: None,
+            noise,
+        })
+    }
+
+    /// Simulation time [s].
+    pub fn time(&self) -> f64 {
+        self.j as f64 * self.p.physics_step_s
+    }
+
+    /// The physical profile.
+    pub fn profile(&self) -> &PhysicalProfile {
+        &self.p
+    }
+
+    /// The step index of the sample instant after the current one.
+    fn next_sample_step(&self) -> usize {
+        match self.steps.get(self.k + 1) {
+            Some(&j) => j,
+            None => self.j + (self.p.period_s / self.p.physics_step_s).round().max(1.0) as usize,
+        }
+    }
+
+    /// What the host sees now: wheel angles (quantised if encoders are on), rates, pose.
+    fn sample(&self) -> Raw {
+        let tick = 2.0 * std::f64::consts::PI / self.p.ticks_per_rev;
+        let body = self.engine.body();
+        Raw {
+            t: self.time(),
+            command: self.command,
+            angle: if self.s.encoders {
+                self.angle.map(|a| (a / tick).floor() * tick)
+            } else {
+                self.angle
+            },
+            rate: self.rates,
+            pose: [body.x, body.y, body.heading],
+        }
+    }
+
+    /// Sends `u` at the current sample instant and advances to the next one.
+    fn advance(&mut self, u: (f64, f64)) {
+        let h = self.p.physics_step_s;
+        let latency = self.s.effects.latency_s.unwrap_or(0.0);
+        self.queue.push_back((self.time() + latency, u));
+        let until = self.next_sample_step();
+        let fx = self.s.effects.clone();
+        while self.j < until {
+            let t = self.time();
+            while self.queue.front().is_some_and(|(at, _)| *at <= t + 0.5 * h) {
+                if let Some((_, c)) = self.queue.pop_front() {
+                    self.command = c;
+                }
+            }
+            self.setpoint = fx.limit_rate(self.setpoint, self.command, h);
+            let v = self.drive.voltages(self.setpoint, self.rates, h);
+            let v = fx.amplify(v, t / self.s.duration_s.max(h));
+            let tau = self.drive.torques(v, self.rates);
+            let fr = fx.friction(self.rates);
+            self.engine.step([tau[0] + fr[0], tau[1] + fr[1]]);
+            let new = self.engine.wheel_rates();
+            for i in 0..2 {
+                self.angle[i] += 0.5 * h * (self.rates[i] + new[i]);
+            }
+            self.rates = new;
+            self.j += 1;
+        }
+        self.k += 1;
+    }
+
+    /// A reported wheel speed [m/s] from a wheel rate [rad/s], with the noise if any.
+    fn wheel_speed(&mut self, rate: f64) -> f64 {
+        let noise = match &mut self.noise {
+            Some((rng, n)) => n.sample(rng),
+            None => 0.0,
+        };
+        rate * self.p.r + noise
+    }
+}
+
+impl Robot for PhysicsRobot {
+    fn name(&self) -> &str {
+        "physics"
+    }
+    fn period_s(&self) -> f64 {
+        self.p.period_s
+    }
+    fn velocity_sampling(&self) -> VelocitySampling {
+        self.s.timing.velocity_sampling()
+    }
+    fn timing(&self) -> Option<Timing> {
+        Some(match self.s.timing {
+            Timing::Instant => Timing::Instant,
+            Timing::WindowEnd | Timing::WindowMiddle => Timing::WindowEnd,
+        })
+    }
+    fn send(&mut self, v_ref: f64, w_ref: f64) -> std::result::Result<(f64, f64), RobotError> {
+        if !(v_ref.is_finite() && w_ref.is_finite()) {
+            return Err(RobotError::Setting(format!(
+                "command ({v_ref}, {w_ref}) is not finite"
+            )));
+        }
+        self.advance((v_ref, w_ref));
+        Ok((v_ref, w_ref))
+    }
+    fn read(&mut self) -> std::result::Result<Odometry, RobotError> {
+        let raw = self.sample();
+        let rates = match (self.s.timing, self.last_read) {
+            (Timing::Instant, _) | (_, None) => raw.rate,
+            (_, Some((t0, a0))) => [0, 1].map(|i| (raw.angle[i] - a0[i]) / (raw.t - t0)),
+        };
+        self.last_read = Some((raw.t, raw.angle));
+        let (vr, vl) = (self.wheel_speed(rates[0]), self.wheel_speed(rates[1]));
+        Ok(Odometry {
+            t: raw.t,
+            v: 0.5 * (vr + vl),
+            w: (vr - vl) / self.p.d,
+            pose: Pose {
+                x: raw.pose[0],
+                y: raw.pose[1],
+                heading: raw.pose[2],
+            },
+        })
+    }
+}
+
+/// Runs the robot under `excitation` from rest and returns what the host saw at each sample.
+fn run_host(p: &PhysicalProfile, exc: &Excitation, s: &PhysicsSettings) -> Result<Vec<Raw>> {
+    let mut robot = PhysicsRobot::new(p, s)?;
+    let n = robot.steps.len();
+    let mut raws = Vec::with_capacity(n);
+    for _ in 0..n {
+        let mut raw = robot.sample();
+        let u = exc.at(raw.t);
+        raw.command = u;
+        raws.push(raw);
+        robot.advance(u);
+    }
+    Ok(raws)
+}
+
+/// Checks a profile and settings.
+fn validate(profile: &PhysicalProfile, s: &PhysicsSettings) -> Result<()> {
     profile.validate()?;
     s.effects.validate()?;
     if !(s.duration_s.is_finite() && s.duration_s > 0.0) {
@@ -208,7 +343,23 @@ pub fn simulate_physics_recording(
             s.wheel_noise_std
         )));
     }
-    let raws = run_host(profile, excitation, s);
+    Ok(())
+}
+
+/// Simulates `profile` under `excitation` from rest and returns the recording the host writes
+/// under `settings.timing` (module docs). Metadata: `robot`, `source`, `theta_map` (the map's
+/// θ of the constants), `model` (`wheel-pd` or `vw-pd`), `effects`, `command_hold: zoh`,
+/// `timing` and `velocity_sampling`.
+///
+/// # Errors
+/// [`Error::InvalidSetting`] for a bad profile or setting (duration ≤ 0, jitter ∉ [0, 0.5),
+/// negative noise, an effect out of range), or an invalid recording (the engine diverged).
+pub fn simulate_physics_recording(
+    profile: &PhysicalProfile,
+    excitation: &Excitation,
+    s: &PhysicsSettings,
+) -> Result<Recording> {
+    let raws = run_host(profile, excitation, s)?;
     let mut rng = ChaCha8Rng::seed_from_u64(s.seed.wrapping_add(0x5eed));
     let noise = Normal::new(0.0, s.wheel_noise_std.max(1e-300))
         .map_err(|e| Error::InvalidSetting(e.to_string()))?;

@@ -91,7 +91,7 @@ impl PhysicalProfile {
     /// (thesis §4.3), 128 ticks/mm (ARIA `p3dx.p`), 100 ms cycle (ARIA). Effective (chosen so
     /// that the map lands near the thesis's θ1 ≈ 0.26 s, θ2 ≈ 0.25 s, θ4, θ6 ≈ 1): track 0.33 m,
     /// I_z = 0.2 kg·m², b = 2 cm, motor k_a = k_b = 0.0287, R_a = 1 Ω, I_e = 10⁻³ kg·m², gains
-    /// K_PT = 55, K_DT = 1.5, K_PR = 7.5, K_DR = 0.2.
+    /// K_PT = 66, K_DT = 1.5, K_PR = 9.4, K_DR = 0.2.
     pub fn pioneer3dx() -> Self {
         let r = 0.0975;
         Self {
@@ -108,9 +108,9 @@ impl PhysicalProfile {
             r_a: 1.0,
             b_e: 0.0,
             controller: Controller::VwPd {
-                k_pt: 55.0,
+                k_pt: 66.0,
                 k_dt: 1.5,
-                k_pr: 7.5,
+                k_pr: 9.4,
                 k_dr: 0.2,
             },
             caster_x: 0.15,
