@@ -55,6 +55,14 @@ fn the_simulator_config_identifies_the_pioneer_and_writes_every_output() {
 }
 
 #[test]
+fn the_physics_config_identifies_the_rigid_body_khepera_within_one_percent_of_its_map() {
+    let out = run(&config("run_physics.toml"), false).expect("runs");
+    assert_eq!(out.recording.meta("timing"), Some("window_end"));
+    let map = wheelid::robots::physics::PhysicalProfile::khepera3().theta();
+    assert_close(&out.identification.theta, &map, 0.01, "physics khepera");
+}
+
+#[test]
 fn the_pioneer_over_arcos_against_the_loopback_server_is_identified() {
     let out = run(&config("run_pioneer_loopback.toml"), false).expect("runs");
     assert_eq!(out.recording.len(), 1200);

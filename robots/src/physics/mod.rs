@@ -241,8 +241,8 @@ impl PhysicsRobot {
             let fr = fx.friction(self.rates);
             self.engine.step([tau[0] + fr[0], tau[1] + fr[1]]);
             let new = self.engine.wheel_rates();
-            for i in 0..2 {
-                self.angle[i] += 0.5 * h * (self.rates[i] + new[i]);
+            for ((a, r0), r1) in self.angle.iter_mut().zip(self.rates).zip(new) {
+                *a += 0.5 * h * (r0 + r1);
             }
             self.rates = new;
             self.j += 1;
