@@ -444,7 +444,8 @@ impl Robot for SimRobot {
 /// Simulates `profile` under `excitation` from rest at the origin and returns the recording
 /// (t, v_ref, ω_ref, v, ω, x, y, φ at each sample instant; the command at t_k is held until
 /// t_{k+1}). The metadata name the robot, seed, true θ and active effects, with
-/// `command_hold: zoh` and `velocity_sampling: window_average` (encoders) or `instant`.
+/// `command_hold: zoh` and `timing: window_end` (encoders; `velocity_sampling:
+/// window_average`) or `timing: instant`.
 ///
 /// # Errors
 /// As [`SimRobot::new`], or if the recording is invalid (e.g. a non-finite state from an
@@ -494,14 +495,13 @@ pub fn simulate_recording(
         },
     );
     rec.set_meta("command_hold", "zoh");
-    rec.set_meta(
-        "velocity_sampling",
-        if s.measurement_noise {
-            "window_average"
-        } else {
-            "instant"
-        },
-    );
+    // Encoders count over the period that ends at the sample, and the command sent at the
+    // sample holds until the next: convention (b); exact states are (a).
+    rec.set_timing(if s.measurement_noise {
+        wheelid_core::Timing::WindowEnd
+    } else {
+        wheelid_core::Timing::Instant
+    });
     Ok(rec)
 }
 

@@ -401,7 +401,10 @@ fn recording_round_trips_through_a_bag_with_twist_and_with_twist_stamped() {
         assert_same_drive(&back, &rec);
         assert_eq!(back.meta("command_type"), Some(command_type.schema_name()));
         assert_eq!(back.meta("command_hold"), Some("zoh"));
-        assert_eq!(back.meta("velocity_sampling"), Some("instant"));
+        // The writer's stamping convention comes back (encoder windows ending at t).
+        assert_eq!(back.meta("velocity_sampling"), Some("window_average"));
+        assert_eq!(back.timing(), rec.timing());
+        assert_eq!(back.meta("robot"), Some("pioneer3dx"));
         assert_eq!(back.meta("odometry_frames"), Some("odom / base_link"));
         assert_eq!(back.meta("t0_ns"), Some("0"));
         assert_abs_diff_eq!(robot.period_s(), rec.sampling().dt_median, epsilon = 1e-9);
@@ -565,6 +568,9 @@ fn commands_are_held_from_the_last_message_at_or_before_each_sample() {
     zoh_bag(&path, CommandType::Twist, 0.0);
     let rec = read_mcap(&path, &BagTopics::default(), TimeSource::LogTime, None).expect("reads");
     assert_eq!(rec.len(), ODOM_S.len());
+    // A bag not written by wheelid claims no stamping convention.
+    assert_eq!(rec.timing(), None);
+    assert_eq!(rec.meta("velocity_sampling"), None);
     assert_eq!(rec.meta("t0_ns"), Some("1700000000000000000"));
     assert_eq!(rec.meta("command_type"), Some("geometry_msgs/msg/Twist"));
     for (k, &t) in ODOM_S.iter().enumerate() {

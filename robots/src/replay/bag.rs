@@ -102,8 +102,11 @@ struct Stamped<T> {
 /// times keep file order, so of two commands at one instant the later in the file holds.
 ///
 /// The metadata name the bag, topics, command type, time source and the absolute time of
-/// t = 0 (`t0_ns`), with `command_hold: zoh` and `velocity_sampling: instant` (an Odometry
-/// twist is the velocity at its stamp).
+/// t = 0 (`t0_ns`), with `command_hold: zoh`. How the rows were stamped (`timing`,
+/// `velocity_sampling`) comes from the bag's `wheelid` metadata record when [`write_mcap`]
+/// wrote it; a bag from elsewhere says nothing of it (an Odometry twist may be an instant or a
+/// mean over the odometry's last cycle), so nothing is claimed and identification estimates
+/// it.
 ///
 /// # Errors
 /// All name the file. [`RobotError::Io`] if it cannot be opened or read;
@@ -131,6 +134,11 @@ pub fn read_mcap(
     };
     let bag = Messages::read(path, topics, time_source)?;
     let mut rec = bag.align(path, topics, timeout_ns)?;
+    // What the writer said of its stamping (a wheelid bag); a bag from a robot says nothing, and
+    // nothing is claimed for it: identification estimates the convention.
+    for (key, value) in wheelid_metadata(path) {
+        rec.set_meta(&key, value);
+    }
     for (key, value) in [
         ("command_topic", topics.command.clone()),
         ("odometry_topic", topics.odometry.clone()),
@@ -341,7 +349,6 @@ impl Messages {
             ("odometry_frames", frames),
             ("t0_ns", first.ns.to_string()),
             ("command_hold", "zoh".to_owned()),
-            ("velocity_sampling", "instant".to_owned()),
         ] {
             rec.set_meta(key, value);
         }
@@ -363,7 +370,8 @@ impl Messages {
 /// gives back t − t_0.
 ///
 /// The file is written to a temporary file in the same directory and renamed at the end, so
-/// a failure leaves no partial bag.
+/// a failure leaves no partial bag. A metadata record `wheelid` keeps the recording's
+/// `timing`, `velocity_sampling`, `robot`, `theta_true`, `theta_map`, `effects` and `jitter`.
 ///
 /// # Errors
 /// [`RobotError::Protocol`] if `rec` is invalid (ragged or non-finite columns, time not
@@ -387,6 +395,42 @@ enum EncodeError {
     Time(f64),
 }
 
+/// Name of the MCAP metadata record in which wheelid keeps a recording's metadata.
+pub const METADATA_NAME: &str = "wheelid";
+
+/// Recording metadata kept in a bag (the rest is rebuilt from the messages).
+const KEPT: [&str; 7] = [
+    "timing",
+    "velocity_sampling",
+    "robot",
+    "theta_true",
+    "theta_map",
+    "effects",
+    "jitter",
+];
+
+/// The `wheelid` metadata record of the bag at `path`, if it has one (any read error: none).
+fn wheelid_metadata(path: &Path) -> Vec<(String, String)> {
+    let Ok(bytes) = std::fs::read(path) else {
+        return Vec::new();
+    };
+    let Ok(reader) = ::mcap::read::LinearReader::new(&bytes) else {
+        return Vec::new();
+    };
+    for record in reader.flatten() {
+        if let ::mcap::records::Record::Metadata(m) = record
+            && m.name == METADATA_NAME
+        {
+            return m
+                .metadata
+                .into_iter()
+                .filter(|(k, _)| KEPT.contains(&k.as_str()))
+                .collect();
+        }
+    }
+    Vec::new()
+}
+
 fn encode_bag(rec: &Recording, topics: &BagTopics) -> Result<Vec<u8>, EncodeError> {
     let mut w = ::mcap::WriteOptions::new()
         .profile("ros2")
@@ -397,6 +441,14 @@ fn encode_bag(rec: &Recording, topics: &BagTopics) -> Result<Vec<u8>, EncodeErro
     let cmd_schema = w.add_schema(kind.schema_name(), "ros2msg", kind.definition().as_bytes())?;
     let odom_channel = w.add_channel(odom_schema, &topics.odometry, "cdr", &qos)?;
     let cmd_channel = w.add_channel(cmd_schema, &topics.command, "cdr", &qos)?;
+    let kept: BTreeMap<String, String> = KEPT
+        .iter()
+        .filter_map(|k| rec.meta(k).map(|v| ((*k).to_owned(), v.to_owned())))
+        .collect();
+    w.write_metadata(&::mcap::records::Metadata {
+        name: METADATA_NAME.to_owned(),
+        metadata: kept,
+    })?;
     let t0 = rec.t.first().copied().unwrap_or(0.0);
     let column = |c: &Option<Vec<f64>>, k: usize| c.as_ref().map_or(0.0, |c| c[k]);
     for k in 0..rec.len() {

@@ -314,9 +314,15 @@ impl Robot for Replay {
         self.period_s
     }
 
-    /// As the log says (its `velocity_sampling` metadata).
+    /// As the log says (its `velocity_sampling` metadata; instants when it says nothing).
     fn velocity_sampling(&self) -> wheelid_core::VelocitySampling {
         self.recording().velocity_sampling()
+    }
+
+    /// As the log says (`timing` or `velocity_sampling` metadata), or `None`: a log that does
+    /// not say is not claimed to be anything, and identification estimates it.
+    fn timing(&self) -> Option<wheelid_core::Timing> {
+        self.recording().timing()
     }
 
     /// Keeps the request in [`Replay::sent`] (a recording does not change) and returns the
