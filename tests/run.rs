@@ -280,7 +280,7 @@ fn run_text(text: &str) -> String {
 fn unknown_types_list_the_known_ones_and_misspelt_keys_name_their_line() {
     let e = run_text("[robot]\ntype = \"roomba\"\n[output]\ndir = \"o\"\n");
     assert!(
-        e.contains("line 1: [robot]: unknown robot type `roomba`; known: simulator, replay, pioneer, khepera"),
+        e.contains("line 1: [robot]: unknown robot type `roomba`; known: simulator, physics, replay, pioneer, khepera"),
         "{e}"
     );
     let e = run_text(
