@@ -235,10 +235,11 @@ impl PhysicsRobot {
                 }
             }
             self.setpoint = fx.limit_rate(self.setpoint, self.command, h);
-            let v = self.drive.voltages(self.setpoint, self.rates, h);
+            let mid = self.drive.midpoint(self.rates);
+            let v = self.drive.voltages(self.setpoint, mid, h);
             let v = fx.amplify(v, t / self.s.duration_s.max(h));
-            let tau = self.drive.torques(v, self.rates);
-            let fr = fx.friction(self.rates);
+            let tau = self.drive.torques(v, mid);
+            let fr = fx.friction(mid);
             self.engine.step([tau[0] + fr[0], tau[1] + fr[1]]);
             let new = self.engine.wheel_rates();
             for ((a, r0), r1) in self.angle.iter_mut().zip(self.rates).zip(new) {
