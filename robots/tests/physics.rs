@@ -1,12 +1,16 @@
-//! The rigid-body backend against closed forms: conventions write what they claim; effects
-//! change the recording the way the physics says.
+//! The rigid-body backend against the maps and closed forms: noise-free runs identify the θ
+//! the physical constants imply (output error); steady turns settle where the maps say; the
+//! conventions write what they claim; effects change the recording the way the physics says.
 
-use wheelid_core::Timing;
+use wheelid_core::{Recording, Robot, Timing};
+use wheelid_models::{VwPd, WheelPd};
 use wheelid_robots::Excitation;
 use wheelid_robots::excitation::Signal;
 use wheelid_robots::physics::{
-    PhysicalProfile, PhysicsEffects, PhysicsSettings, simulate_physics_recording,
+    Controller, Payload, PhysicalProfile, PhysicsEffects, PhysicsRobot, PhysicsSettings,
+    simulate_physics_recording,
 };
+use wheelid_solvers::OutputError;
 
 /// Constant commands (v_ref, ω_ref).
 fn constant(v: f64, w: f64) -> Excitation {
@@ -178,4 +182,464 @@ fn steady_turns_settle_where_the_maps_theta_says() {
             );
         }
     }
+}
+
+/// A random multisine up to about 1.5× the robot's bandwidth, inside its speed limits.
+fn excitation(p: &PhysicalProfile, seed: u64) -> Excitation {
+    let th = p.theta();
+    let f_bw = 1.0 / (2.0 * std::f64::consts::PI * th[0].max(th[1]));
+    let f_max = (1.5 * f_bw).clamp(0.2, 0.2 / p.period_s);
+    Excitation::random_multisine(seed, 0.1 * p.v_max, 0.3 * p.v_max, 0.35 * p.w_max, f_max)
+        .expect("excitation")
+}
+
+/// θ by output error on the profile's own model, started 10 % off the map's θ.
+fn identify(p: &PhysicalProfile, rec: &Recording) -> Vec<f64> {
+    let start: Vec<f64> = p.theta().iter().map(|x| 1.1 * x).collect();
+    let recs = std::slice::from_ref(rec);
+    let fit = match p.controller {
+        Controller::WheelPd { .. } => OutputError::default().fit(&WheelPd, recs, &start),
+        Controller::VwPd { .. } => OutputError::default().fit(&VwPd, recs, &start),
+    };
+    fit.expect("output error fits").theta
+}
+
+fn rms(x: impl Iterator<Item = f64>) -> f64 {
+    let (s, n) = x.fold((0.0, 0usize), |(s, n), v| (s + v * v, n + 1));
+    (s / n.max(1) as f64).sqrt()
+}
+
+/// Errors of θ1, θ2, θ4, θ6 in % of the map's, and of θ3, θ5 as their effect on the output:
+/// Δθ3·rms(ω²)/θ4 in % of rms(v), Δθ5·rms(vω)/θ6 in % of rms(ω) (their steady-state shares).
+fn theta_errors(th: &[f64], map: &[f64; 6], rec: &Recording) -> [f64; 6] {
+    let rel = |i: usize| 100.0 * (th[i] - map[i]) / map[i];
+    let w2 = rms(rec.w.iter().map(|w| w * w));
+    let vw = rms(rec.v.iter().zip(&rec.w).map(|(v, w)| v * w));
+    let e3 = 100.0 * (th[2] - map[2]) * w2 / map[3] / rms(rec.v.iter().copied());
+    let e5 = 100.0 * (th[4] - map[4]) * vw / map[5] / rms(rec.w.iter().copied());
+    [rel(0), rel(1), e3, rel(3), e5, rel(5)]
+}
+
+/// Issue 14's check of the maps and the engine set-up: noise-free runs (instants, no encoders,
+/// no jitter) identify θ1, θ2, θ4, θ6 within 1 % of the map's θ, and θ3, θ5 within 1 % of
+/// their effect on the output.
+#[test]
+fn noise_free_runs_identify_the_maps_theta() {
+    for (name, duration) in [("khepera3", 60.0), ("pioneer3dx", 120.0)] {
+        let p = PhysicalProfile::by_name(name).expect("built in");
+        let rec = simulate_physics_recording(
+            &p,
+            &excitation(&p, 1),
+            &settings(Timing::Instant, duration),
+        )
+        .expect("simulates");
+        let map = p.theta();
+        let th = identify(&p, &rec);
+        let e = theta_errors(&th, &map, &rec);
+        eprintln!(
+            "{name} ({duration} s at {} Hz, h = {} ms):",
+            1.0 / p.period_s,
+            1e3 * p.physics_step_s
+        );
+        eprintln!("  param        map   identified   error %");
+        for i in 0..6 {
+            let how = if i == 2 || i == 4 {
+                " (of the output)"
+            } else {
+                ""
+            };
+            eprintln!(
+                "  θ{}   {:>10.6}   {:>10.6}   {:+.3}{how}",
+                i + 1,
+                map[i],
+                th[i],
+                e[i]
+            );
+        }
+        for (i, x) in e.iter().enumerate() {
+            assert!(x.abs() < 1.0, "{name}: θ{} off by {x:.3} %", i + 1);
+        }
+    }
+}
+
+/// The rigid-body steady state of a wheel-PD robot, from the physics (not from θ): per wheel
+/// (k_a/R_a)(g_i k_P (ω_i,ref − ω_i) − k_b ω_i) − B_e ω_i − F_c sign ω_i = r F_i, with the
+/// body's F_r + F_l = −m b ω², F_r − F_l = 2 m b v ω/d, v = r (ω_r + ω_l)/2, ω = r (ω_r − ω_l)/d.
+/// Returns (v, ω) measured by the wheels.
+fn wheel_pd_steady(
+    p: &PhysicalProfile,
+    g: [f64; 2],
+    f_c: f64,
+    v_ref: f64,
+    w_ref: f64,
+) -> (f64, f64) {
+    let Controller::WheelPd { k_p, .. } = p.controller else {
+        panic!("a wheel-PD profile")
+    };
+    let refs = [
+        (v_ref + p.d * w_ref / 2.0) / p.r,
+        (v_ref - p.d * w_ref / 2.0) / p.r,
+    ];
+    let (mut v, mut w) = (v_ref, w_ref);
+    for _ in 0..200 {
+        let (sum, diff) = (-p.m * p.b * w * w, 2.0 * p.m * p.b * v * w / p.d);
+        let f = [(sum + diff) / 2.0, (sum - diff) / 2.0];
+        let om = [0, 1].map(|i| {
+            let load = p.r_a / p.k_a * (p.r * f[i] + f_c * refs[i].signum());
+            (g[i] * k_p * refs[i] - load) / (g[i] * k_p + p.k_b + p.r_a * p.b_e / p.k_a)
+        });
+        (v, w) = (p.r * (om[0] + om[1]) / 2.0, p.r * (om[0] - om[1]) / p.d);
+    }
+    (v, w)
+}
+
+/// The Khepera-like robot with a weak P gain, so that the back-EMF share k_b/(g k_P) makes an
+/// amplifier's gain visible in the steady state (θ1 ≈ 0.43 s).
+fn soft_khepera() -> PhysicalProfile {
+    let mut p = PhysicalProfile::khepera3();
+    p.controller = Controller::WheelPd { k_p: 0.2, k_d: 0.0 };
+    p
+}
+
+fn with_effects(timing: Timing, duration: f64, effects: PhysicsEffects) -> PhysicsSettings {
+    PhysicsSettings {
+        effects,
+        ..settings(timing, duration)
+    }
+}
+
+/// Index of the first row at or after `t`.
+fn at(rec: &Recording, t: f64) -> usize {
+    rec.t
+        .iter()
+        .position(|&x| x >= t - 1e-9)
+        .unwrap_or(rec.len() - 1)
+}
+
+#[test]
+fn dry_friction_in_the_wheel_joints_lowers_the_steady_speed_by_its_torque() {
+    let p = PhysicalProfile::khepera3();
+    let f_c = 0.0025;
+    let s = with_effects(
+        Timing::Instant,
+        2.0,
+        PhysicsEffects {
+            dry_friction_nm: Some(f_c),
+            ..PhysicsEffects::default()
+        },
+    );
+    let rec = simulate_physics_recording(&p, &constant(0.15, 0.0), &s).expect("simulates");
+    let (v, _) = wheel_pd_steady(&p, [1.0; 2], f_c, 0.15, 0.0);
+    let (v0, _) = wheel_pd_steady(&p, [1.0; 2], 0.0, 0.15, 0.0);
+    let k = rec.len() - 1;
+    eprintln!(
+        "dry friction {f_c} N·m: v {:.6} (closed form {v:.6}, without {v0:.6})",
+        rec.v[k]
+    );
+    assert!(
+        (rec.v[k] - v).abs() < 2e-3 * (v0 - v).abs().max(1e-3 * v),
+        "{} vs {v}",
+        rec.v[k]
+    );
+    assert!(v0 - v > 0.02 * v0, "the friction shows");
+}
+
+#[test]
+fn one_weak_amplifier_turns_the_robot_as_the_torque_balance_says() {
+    let p = soft_khepera();
+    let s = with_effects(
+        Timing::Instant,
+        12.0,
+        PhysicsEffects {
+            amp_gain_right: Some(0.9),
+            ..PhysicsEffects::default()
+        },
+    );
+    let rec = simulate_physics_recording(&p, &constant(0.15, 0.0), &s).expect("simulates");
+    let (v, w) = wheel_pd_steady(&p, [0.9, 1.0], 0.0, 0.15, 0.0);
+    let k = rec.len() - 1;
+    eprintln!(
+        "right amplifier ×0.9: v {:.6} ω {:.6} (closed form {v:.6}, {w:.6})",
+        rec.v[k], rec.w[k]
+    );
+    assert!((rec.v[k] - v).abs() < 1e-3 * v, "v {} vs {v}", rec.v[k]);
+    assert!(
+        (rec.w[k] - w).abs() < 0.01 * w.abs(),
+        "ω {} vs {w}",
+        rec.w[k]
+    );
+}
+
+#[test]
+fn a_sagging_battery_slows_the_robot_as_its_gain_falls() {
+    // Gain g(t) = 1 − 0.5 t/T; the loop (θ1 ≈ 0.43 s) follows the slow sag quasi-statically.
+    let p = soft_khepera();
+    let duration = 20.0;
+    let s = with_effects(
+        Timing::Instant,
+        duration,
+        PhysicsEffects {
+            gain_sag: Some(0.5),
+            ..PhysicsEffects::default()
+        },
+    );
+    let rec = simulate_physics_recording(&p, &constant(0.15, 0.0), &s).expect("simulates");
+    for t in [5.0, 10.0, 19.0] {
+        let k = at(&rec, t);
+        let g = 1.0 - 0.5 * rec.t[k] / duration;
+        let (v, _) = wheel_pd_steady(&p, [g; 2], 0.0, 0.15, 0.0);
+        eprintln!(
+            "gain sag at {t} s (g = {g:.3}): v {:.6}, quasi-static {v:.6}",
+            rec.v[k]
+        );
+        assert!(
+            (rec.v[k] - v).abs() < 3e-3 * v,
+            "t {t}: {} vs {v}",
+            rec.v[k]
+        );
+    }
+}
+
+#[test]
+fn a_larger_right_tyre_curves_the_path_the_encoders_call_straight() {
+    // The host converts with the nominal r; the body turns at (1.03 v_r − v_l)/d with v_r, v_l
+    // the wheel speeds the host reports.
+    let p = PhysicalProfile::khepera3();
+    let f = 1.03;
+    let s = with_effects(
+        Timing::Instant,
+        3.0,
+        PhysicsEffects {
+            tyre_radius_right: Some(f),
+            ..PhysicsEffects::default()
+        },
+    );
+    let rec = simulate_physics_recording(&p, &constant(0.15, 0.0), &s).expect("simulates");
+    let phi = rec.phi.as_ref().expect("pose");
+    let (k0, k1) = (at(&rec, 2.0), rec.len() - 1);
+    let body_w = (phi[k1] - phi[k0]) / (rec.t[k1] - rec.t[k0]);
+    let (vr, vl) = (
+        rec.v[k1] + rec.w[k1] * p.d / 2.0,
+        rec.v[k1] - rec.w[k1] * p.d / 2.0,
+    );
+    let want = (f * vr - vl) / p.d;
+    eprintln!(
+        "right tyre ×{f}: body ω {body_w:.5} rad/s, (f v_r − v_l)/d {want:.5}, encoders' ω {:.2e}",
+        rec.w[k1]
+    );
+    assert!((body_w - want).abs() < 0.01 * want, "{body_w} vs {want}");
+    assert!(
+        rec.w[k1].abs() < 0.05 * want,
+        "the encoders see (nearly) straight driving"
+    );
+}
+
+#[test]
+fn command_latency_shifts_the_response_by_the_latency() {
+    let p = PhysicalProfile::khepera3();
+    let exc = excitation(&p, 4);
+    let lag = 3;
+    let latency = lag as f64 * p.period_s;
+    let base =
+        simulate_physics_recording(&p, &exc, &settings(Timing::Instant, 10.0)).expect("simulates");
+    let s = with_effects(
+        Timing::Instant,
+        10.0,
+        PhysicsEffects {
+            latency_s: Some(latency),
+            ..PhysicsEffects::default()
+        },
+    );
+    let late = simulate_physics_recording(&p, &exc, &s).expect("simulates");
+    // Cross-correlation of the two v series over shifts 0..8: its peak is at the latency.
+    let xcorr = |l: usize| {
+        (20..base.len() - 10)
+            .map(|k| late.v[k] * base.v[k - l])
+            .sum::<f64>()
+    };
+    let best = (0..8)
+        .max_by(|&a, &b| xcorr(a).total_cmp(&xcorr(b)))
+        .expect("shifts");
+    let swing = rms(base.v.iter().copied());
+    let diff = (20..base.len())
+        .map(|k| (late.v[k] - base.v[k - lag]).abs())
+        .fold(0.0, f64::max);
+    eprintln!(
+        "latency {latency} s: cross-correlation peak at {best} samples, shifted difference {:.2e} of rms v",
+        diff / swing
+    );
+    assert_eq!(best, lag);
+    assert!(diff < 1e-3 * swing, "{diff}");
+}
+
+#[test]
+fn a_payload_set_down_mid_run_moves_the_turn_to_the_loaded_maps_steady_state() {
+    let p = PhysicalProfile::khepera3();
+    let payload = Payload {
+        mass_kg: 0.3,
+        at_s: 2.0,
+        x_m: 0.02,
+        size_m: 0.03,
+    };
+    let s = with_effects(
+        Timing::Instant,
+        5.0,
+        PhysicsEffects {
+            payload: Some(payload),
+            ..PhysicsEffects::default()
+        },
+    );
+    let (vr, wr) = (0.15, 1.8);
+    let rec = simulate_physics_recording(&p, &constant(vr, wr), &s).expect("simulates");
+    for (profile, t) in [(p.clone(), 1.95), (payload.loaded(&p), 4.9)] {
+        let th = profile.theta();
+        let (mut v, mut w) = (vr, wr);
+        for _ in 0..50 {
+            v = (vr + th[2] * w * w) / th[3];
+            w = wr / (th[5] + th[4] * v);
+        }
+        let k = at(&rec, t);
+        eprintln!(
+            "{} at {t} s: ω {:.6}, map {w:.6} (θ5 {:.4})",
+            profile.name, rec.w[k], th[4]
+        );
+        assert!(
+            (rec.w[k] - w).abs() < 1e-4 * p.w_max,
+            "{}: {} vs {w}",
+            profile.name,
+            rec.w[k]
+        );
+        assert!(
+            (rec.v[k] - v).abs() < 1e-4 * p.v_max,
+            "{}: {} vs {v}",
+            profile.name,
+            rec.v[k]
+        );
+    }
+}
+
+#[test]
+fn a_payload_raises_theta_as_the_map_of_the_loaded_robot_says() {
+    let p = PhysicalProfile::khepera3();
+    let payload = Payload {
+        mass_kg: 0.3,
+        at_s: 0.0,
+        x_m: 0.02,
+        size_m: 0.03,
+    };
+    let s = with_effects(
+        Timing::Instant,
+        40.0,
+        PhysicsEffects {
+            payload: Some(payload),
+            ..PhysicsEffects::default()
+        },
+    );
+    let rec = simulate_physics_recording(&p, &excitation(&p, 5), &s).expect("simulates");
+    let loaded = payload.loaded(&p);
+    let map = loaded.theta();
+    let th = identify(&loaded, &rec);
+    let e = theta_errors(&th, &map, &rec);
+    eprintln!(
+        "payload 0.3 kg: unloaded θ {:.5?}\n  loaded map {map:.5?}\n  identified {th:.5?}\n  error % {e:.3?}",
+        p.theta()
+    );
+    // The mass raises θ1 by a third; set near the centre it raises θ2 (yaw inertia) by 4 %,
+    // and m·b, θ3 and θ5, by four fifths.
+    let th0 = p.theta();
+    assert!(map[0] > 1.3 * th0[0] && map[1] > 1.03 * th0[1] && map[4] > 1.5 * th0[4]);
+    for (i, x) in e.iter().enumerate() {
+        assert!(x.abs() < 1.0, "θ{} off by {x:.3} %", i + 1);
+    }
+}
+
+#[test]
+fn encoder_ticks_quantise_the_window_averages() {
+    let p = PhysicalProfile::khepera3();
+    let s = PhysicsSettings {
+        encoders: true,
+        ..settings(Timing::WindowEnd, 4.0)
+    };
+    let rec = simulate_physics_recording(&p, &excitation(&p, 6), &s).expect("simulates");
+    // Each wheel speed is a whole number of ticks per window: r q n / Δ, q = 2π/ticks.
+    let unit = p.r * 2.0 * std::f64::consts::PI / p.ticks_per_rev / p.period_s;
+    let mut moving = 0;
+    for k in 1..rec.len() {
+        for x in [
+            rec.v[k] + rec.w[k] * p.d / 2.0,
+            rec.v[k] - rec.w[k] * p.d / 2.0,
+        ] {
+            let n = x / unit;
+            assert!((n - n.round()).abs() < 1e-6, "row {k}: {n} ticks");
+            moving += usize::from(n.round() != 0.0);
+        }
+    }
+    assert!(moving > rec.len(), "the wheels turned");
+}
+
+#[test]
+fn under_jitter_window_averages_are_the_motion_over_the_actual_windows() {
+    // Straight driving: each (b) row's v is the axle's displacement over the actual (jittered)
+    // window divided by its length; (c) is (b) of the next row stamped at the window's middle.
+    let p = PhysicalProfile::khepera3();
+    let exc = Excitation {
+        v_ref: excitation(&p, 7).v_ref,
+        w_ref: Signal::Constant { value: 0.0 },
+    };
+    let s = |timing| PhysicsSettings {
+        jitter: 0.2,
+        ..settings(timing, 4.0)
+    };
+    let b = simulate_physics_recording(&p, &exc, &s(Timing::WindowEnd)).expect("simulates");
+    let c = simulate_physics_recording(&p, &exc, &s(Timing::WindowMiddle)).expect("simulates");
+    let x = b.x.as_ref().expect("pose");
+    let swing = rms(b.v.iter().copied());
+    let (mut dt_min, mut dt_max) = (f64::MAX, 0.0f64);
+    for k in 1..b.len() - 1 {
+        let dt = b.t[k] - b.t[k - 1];
+        (dt_min, dt_max) = (dt_min.min(dt), dt_max.max(dt));
+        assert!((b.t[k] - k as f64 * p.period_s).abs() <= 0.2 * p.period_s + p.physics_step_s);
+        let moved = (x[k] - x[k - 1]) / dt;
+        assert!(
+            (b.v[k] - moved).abs() < 1e-3 * swing,
+            "row {k}: {} vs {moved}",
+            b.v[k]
+        );
+        approx::assert_abs_diff_eq!(c.t[k], 0.5 * (b.t[k] + b.t[k + 1]), epsilon = 1e-12);
+        approx::assert_abs_diff_eq!(c.v[k], b.v[k + 1], epsilon = 1e-12);
+        assert_eq!(c.v_ref[k], b.v_ref[k]);
+    }
+    eprintln!(
+        "jitter ±20 %: windows {:.1}–{:.1} ms",
+        1e3 * dt_min,
+        1e3 * dt_max
+    );
+    assert!(
+        dt_max - dt_min > 0.5 * 0.4 * p.period_s,
+        "the instants wander"
+    );
+}
+
+#[test]
+fn the_robot_trait_reads_what_the_recording_writes() {
+    // Read, then send: report k averages the window ending at s_k; the command sent after it
+    // holds until s_{k+1} — row k of the (b) recording.
+    let p = PhysicalProfile::khepera3();
+    let exc = excitation(&p, 8);
+    let s = PhysicsSettings {
+        encoders: true,
+        jitter: 0.1,
+        ..settings(Timing::WindowEnd, 2.0)
+    };
+    let rec = simulate_physics_recording(&p, &exc, &s).expect("simulates");
+    let mut robot = PhysicsRobot::new(&p, &s).expect("robot");
+    for k in 0..rec.len() {
+        let o = robot.read().expect("reads");
+        let (v, w) = exc.at(o.t);
+        assert_eq!(robot.send(v, w).expect("sends"), (v, w));
+        approx::assert_abs_diff_eq!(o.t, rec.t[k], epsilon = 1e-12);
+        approx::assert_abs_diff_eq!(o.v, rec.v[k], epsilon = 1e-12);
+        approx::assert_abs_diff_eq!(o.w, rec.w[k], epsilon = 1e-12);
+    }
+    assert_eq!(robot.timing(), Some(Timing::WindowEnd));
 }

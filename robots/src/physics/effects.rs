@@ -7,13 +7,21 @@
 //! | `latency_s` | host → robot link | a command reaches the controller `latency_s` after it was sent |
 //! | `rate_limit` | onboard setpoint | v and ω setpoints move toward the command at most `v_accel`, `w_accel` per second (Pioneer TransAccel/RotAccel) |
 //! | `voltage_clamp` | amplifier | each wheel's voltage is clamped to ±`volts`; back-EMF still acts |
-//! | `gain_sag` | amplifier (battery) | output voltage × (1 − `fraction` · t/T) over the run |
+//! | `gain_sag` | amplifier (battery) | output voltage × (1 − `fraction` · t/T) over the run (T: the run's duration) |
+//! | `gain_decay_tau_s` | amplifier (battery) | output voltage × e^(−t/τ) |
 //! | `amp_gain_right` | right amplifier | its voltage × the factor (one amplifier off by a few %) |
-//! | `dry_friction_nm` | wheel joints | Coulomb torque −F·sign(ω_i) (smoothed over 0.01 rad/s) |
+//! | `tyre_radius_right` | right tyre | its radius × the factor (the host still converts with r) |
+//! | `dry_friction_nm` | wheel joints | Coulomb torque −F·tanh(ω_i/0.01 rad/s) |
 //! | `floor_mu` | floor contact | wheel–floor friction (low: the wheels slip; encoders see the wheels) |
+//! | `payload` | chassis | a body set down at time T and held by a fixed joint ([`super::payload`]) |
+//!
+//! Encoder quantisation, wheel-speed noise and host jitter are [`super::PhysicsSettings`].
 
 use serde::{Deserialize, Serialize};
 use wheelid_core::{Error, Result};
+
+use super::PhysicalProfile;
+use super::payload::Payload;
 
 /// The setpoint rate limit (onboard, on the v and ω setpoints).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -37,12 +45,18 @@ pub struct PhysicsEffects {
     pub voltage_clamp: Option<f64>,
     /// Drive-gain sag: fraction of the amplifier gain lost, linearly, by the end of the run.
     pub gain_sag: Option<f64>,
+    /// Drive-gain decay: the amplifier gain falls as e^(−t/τ), τ in seconds.
+    pub gain_decay_tau_s: Option<f64>,
     /// Right amplifier's gain relative to the left's (e.g. 0.95).
     pub amp_gain_right: Option<f64>,
+    /// Right tyre's radius relative to the nominal r (e.g. 1.03: worn left or oversized right).
+    pub tyre_radius_right: Option<f64>,
     /// Coulomb friction torque in each wheel joint [N·m].
     pub dry_friction_nm: Option<f64>,
     /// Wheel–floor friction coefficient (default 1).
     pub floor_mu: Option<f64>,
+    /// A payload set down on the chassis mid-run.
+    pub payload: Option<Payload>,
 }
 
 impl PhysicsEffects {
@@ -54,9 +68,12 @@ impl PhysicsEffects {
             ("rate_limit", self.rate_limit.is_some()),
             ("voltage_clamp", self.voltage_clamp.is_some()),
             ("gain_sag", self.gain_sag.is_some()),
+            ("gain_decay", self.gain_decay_tau_s.is_some()),
             ("amp_gain_right", self.amp_gain_right.is_some()),
+            ("tyre_radius_right", self.tyre_radius_right.is_some()),
             ("dry_friction", self.dry_friction_nm.is_some()),
             ("floor_mu", self.floor_mu.is_some()),
+            ("payload", self.payload.is_some()),
         ];
         for (name, is) in on {
             if is {
@@ -66,11 +83,11 @@ impl PhysicsEffects {
         v
     }
 
-    /// Checks every value.
+    /// Checks every value (the payload against the robot `p` it is put on).
     ///
     /// # Errors
     /// [`Error::InvalidSetting`] naming the effect whose value is out of range.
-    pub fn validate(&self) -> Result<()> {
+    pub fn validate(&self, p: &PhysicalProfile) -> Result<()> {
         let check = |name: &str, x: Option<f64>, ok: &dyn Fn(f64) -> bool| match x {
             Some(x) if !(x.is_finite() && ok(x)) => Err(Error::InvalidSetting(format!(
                 "physics effect {name} = {x} is out of range"
@@ -80,12 +97,19 @@ impl PhysicsEffects {
         check("latency_s", self.latency_s, &|x| x >= 0.0)?;
         check("voltage_clamp", self.voltage_clamp, &|x| x > 0.0)?;
         check("gain_sag", self.gain_sag, &|x| (0.0..1.0).contains(&x))?;
+        check("gain_decay_tau_s", self.gain_decay_tau_s, &|x| x > 0.0)?;
         check("amp_gain_right", self.amp_gain_right, &|x| x > 0.0)?;
+        check("tyre_radius_right", self.tyre_radius_right, &|x| {
+            (0.5..2.0).contains(&x)
+        })?;
         check("dry_friction_nm", self.dry_friction_nm, &|x| x >= 0.0)?;
         check("floor_mu", self.floor_mu, &|x| x > 0.0)?;
         if let Some(r) = self.rate_limit {
             check("rate_limit.v_accel", Some(r.v_accel), &|x| x > 0.0)?;
             check("rate_limit.w_accel", Some(r.w_accel), &|x| x > 0.0)?;
+        }
+        if let Some(pl) = &self.payload {
+            pl.validate(p)?;
         }
         Ok(())
     }
@@ -104,10 +128,13 @@ impl PhysicsEffects {
         }
     }
 
-    /// The amplifier's output voltages for the controller's `u` at fraction `progress` ∈ [0, 1]
-    /// of the run: gain sag, right-amplifier gain, clamp.
-    pub fn amplify(&self, u: [f64; 2], progress: f64) -> [f64; 2] {
-        let sag = 1.0 - self.gain_sag.unwrap_or(0.0) * progress;
+    /// The amplifier's output voltages (right, left) [V] for the controller's `u` [V] at time
+    /// `t` [s] of a run of `duration` [s]: gain sag (linear, held after the run's end) or
+    /// decay, right-amplifier gain, clamp.
+    pub fn amplify(&self, u: [f64; 2], t: f64, duration: f64) -> [f64; 2] {
+        let progress = (t / duration).clamp(0.0, 1.0);
+        let sag = (1.0 - self.gain_sag.unwrap_or(0.0) * progress)
+            * self.gain_decay_tau_s.map_or(1.0, |tau| (-t / tau).exp());
         let gains = [self.amp_gain_right.unwrap_or(1.0) * sag, sag];
         [0, 1].map(|i| {
             let x = u[i] * gains[i];

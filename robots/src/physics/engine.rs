@@ -31,6 +31,8 @@
 
 use rapier3d_f64::prelude::*;
 
+use super::effects::PhysicsEffects;
+use super::payload::Payload;
 use super::profile::PhysicalProfile;
 
 /// The contacts' natural angular frequency × the physics step, 2π f_c h (module docs).
@@ -71,8 +73,12 @@ pub struct BodyState {
 }
 
 impl Engine {
-    /// Builds the robot at rest at the origin, heading +x, on a floor of friction `floor_mu`.
-    pub fn new(p: &PhysicalProfile, floor_mu: f64) -> Self {
+    /// Builds the robot at rest at the origin, heading +x, on a floor of friction
+    /// `effects.floor_mu` (default [`FLOOR_MU`]), the right tyre's radius × `tyre_radius_right`
+    /// (its axle mounted that much higher, so the chassis stays level).
+    pub fn new(p: &PhysicalProfile, effects: &PhysicsEffects) -> Self {
+        let floor_mu = effects.floor_mu.unwrap_or(FLOOR_MU);
+        let radii = [p.r * effects.tyre_radius_right.unwrap_or(1.0), p.r];
         let mut world = PhysicsWorld::new();
         world.gravity = Vector::new(0.0, 0.0, -9.81);
         let ip = &mut world.integration_parameters;
@@ -115,19 +121,20 @@ impl Engine {
         let mut wheels = [chassis; 2];
         let mut wheel_colliders = Vec::with_capacity(2);
         for (i, side) in [-1.0, 1.0].into_iter().enumerate() {
+            let ri = radii[i];
             let (wheel, collider) = world.insert(
                 RigidBodyBuilder::dynamic()
-                    .translation(Vector::new(0.0, side * p.d / 2.0, r))
+                    .translation(Vector::new(0.0, side * p.d / 2.0, ri))
                     .can_sleep(false)
                     .additional_mass_properties(MassProperties::new(
                         Vector::ZERO,
                         mw,
                         Vector::new(i_perp, p.i_e, i_perp),
                     )),
-                ColliderBuilder::ball(r).density(0.0).friction(floor_mu),
+                ColliderBuilder::ball(ri).density(0.0).friction(floor_mu),
             );
             let joint = RevoluteJointBuilder::new(Vector::Y)
-                .local_anchor1(Vector::new(0.0, side * p.d / 2.0, 0.0))
+                .local_anchor1(Vector::new(0.0, side * p.d / 2.0, ri - r))
                 .local_anchor2(Vector::ZERO);
             world.impulse_joints.insert(chassis, wheel, joint, true);
             wheels[i] = wheel;
@@ -170,6 +177,30 @@ impl Engine {
         self.world.step();
     }
 
+    /// Sets `payload` down on the chassis now: a cube at `x_m` ahead of the axle, `size_m/2`
+    /// above the axle's height, moving with the chassis, held by a fixed joint.
+    pub fn place_payload(&mut self, payload: &Payload) {
+        let c = &self.world.bodies[self.chassis];
+        let local = Vector::new(payload.x_m, 0.0, 0.5 * payload.size_m);
+        let at = c.translation() + c.rotation() * local;
+        let (linvel, angvel) = (c.velocity_at_point(at), c.angvel());
+        let i = payload.own_yaw_inertia();
+        let body = self.world.insert_body(
+            RigidBodyBuilder::dynamic()
+                .pose(Pose::from_parts(at, *c.rotation()))
+                .linvel(linvel)
+                .angvel(angvel)
+                .can_sleep(false)
+                .additional_mass_properties(MassProperties::new(
+                    Vector::ZERO,
+                    payload.mass_kg,
+                    Vector::new(i, i, i),
+                )),
+        );
+        let joint = FixedJointBuilder::new().local_anchor1(local);
+        self.world.insert_impulse_joint(self.chassis, body, joint);
+    }
+
     /// The chassis's planar state (at the axle centre).
     pub fn body(&self) -> BodyState {
         let c = &self.world.bodies[self.chassis];
@@ -210,7 +241,7 @@ mod tests {
         for name in PhysicalProfile::NAMES {
             let p = PhysicalProfile::by_name(name).expect("built in");
             let h = p.physics_step_s;
-            let mut e = Engine::new(&p, FLOOR_MU);
+            let mut e = Engine::new(&p, &PhysicsEffects::default());
             for _ in 0..(0.2 / h) as usize {
                 e.step([0.0; 2]);
             }
