@@ -643,3 +643,44 @@ fn the_robot_trait_reads_what_the_recording_writes() {
     }
     assert_eq!(robot.timing(), Some(Timing::WindowEnd));
 }
+
+#[test]
+fn settings_and_profiles_read_from_toml_and_refuse_unknown_keys() {
+    let s: PhysicsSettings = toml::from_str(
+        r#"
+        duration_s = 30.0
+        timing = "window_middle"
+        jitter = 0.1
+        [effects]
+        latency_s = 0.02
+        voltage_clamp = 6.0
+        gain_sag = 0.1
+        gain_decay_tau_s = 600.0
+        amp_gain_right = 0.97
+        tyre_radius_right = 1.02
+        dry_friction_nm = 0.001
+        floor_mu = 0.3
+        rate_limit = { v_accel = 0.3, w_accel = 1.0 }
+        payload = { mass_kg = 0.2, at_s = 10.0, x_m = 0.02, size_m = 0.03 }
+        "#,
+    )
+    .expect("parses");
+    assert_eq!(s.timing, Timing::WindowMiddle);
+    assert_eq!(s.effects.active().len(), 10);
+    PhysicsRobot::new(&PhysicalProfile::khepera3(), &s).expect("valid for the Khepera-like robot");
+    // A payload that moves the centre of mass past the caster is refused.
+    let mut heavy = s.clone();
+    heavy.effects.payload = Some(Payload {
+        mass_kg: 5.0,
+        at_s: 0.0,
+        x_m: 0.06,
+        size_m: 0.03,
+    });
+    let e = PhysicsRobot::new(&PhysicalProfile::khepera3(), &heavy).expect_err("refused");
+    assert!(e.to_string().contains("payload"), "{e}");
+    assert!(toml::from_str::<PhysicsSettings>("[effects]\nlatency = 0.1").is_err());
+    let p: PhysicalProfile =
+        toml::from_str(&toml::to_string(&PhysicalProfile::pioneer3dx()).expect("writes"))
+            .expect("reads");
+    assert_eq!(p, PhysicalProfile::pioneer3dx());
+}
