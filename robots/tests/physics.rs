@@ -684,3 +684,37 @@ fn settings_and_profiles_read_from_toml_and_refuse_unknown_keys() {
             .expect("reads");
     assert_eq!(p, PhysicalProfile::pioneer3dx());
 }
+
+#[test]
+fn a_slow_onboard_controller_shortens_theta_by_half_its_period() {
+    // A digital controller at T_c = 2 ms samples and holds: the feedback lags T_c/2 on
+    // average, so θ1 ≈ θ1,map − θ4 T_c/2 and θ2 ≈ θ2,map − θ6 T_c/2 (−3.8 % and −1.7 % here).
+    let mut p = PhysicalProfile::khepera3();
+    let t_c = 2e-3;
+    p.controller_period_s = Some(t_c);
+    let rec = simulate_physics_recording(&p, &excitation(&p, 9), &settings(Timing::Instant, 30.0))
+        .expect("simulates");
+    let map = p.theta();
+    let th = identify(&p, &rec);
+    let want = [map[0] - map[3] * t_c / 2.0, map[1] - map[5] * t_c / 2.0];
+    eprintln!(
+        "controller at {} ms: θ1 {:.6} (map {:.6}, map − θ4 T_c/2 {:.6}), θ2 {:.6} (map {:.6}, − θ6 T_c/2 {:.6})",
+        1e3 * t_c,
+        th[0],
+        map[0],
+        want[0],
+        th[1],
+        map[1],
+        want[1]
+    );
+    for i in 0..2 {
+        let shift = map[i] - want[i];
+        assert!(
+            (th[i] - want[i]).abs() < 0.1 * shift,
+            "θ{}: {} vs {}",
+            i + 1,
+            th[i],
+            want[i]
+        );
+    }
+}

@@ -24,6 +24,13 @@
 //! Euler), the feedback would act h/2 early on average and shorten the closed loop's time
 //! constants by h/2: θ1, θ2 biased by −h/(2τ) (−0.48 % for a Khepera-like robot at 0.25 ms,
 //! measured −0.45 %).
+//!
+//! A profile may give the controller its own period T_c (`controller_period_s`, a whole number
+//! of steps): it then samples the wheel rates at its instants, differentiates over T_c (the
+//! same filter, n_f controller periods) and holds its voltages for T_c, as a digital
+//! controller does — the motor (back-EMF, friction) still acts continuously. The sample-and-hold
+//! lags the feedback by T_c/2 on average, so θ1, θ2 come out shorter than the continuous map's
+//! by about θ4·T_c/2 and θ6·T_c/2 (a physical effect of a slow controller, not of the engine).
 
 use super::profile::{Controller, PhysicalProfile};
 
@@ -39,6 +46,11 @@ pub struct Drive {
     prev_rates: Option<[f64; 2]>,
     /// The derivative filter's time constant in steps, n_f (module docs).
     filter_steps: f64,
+    /// Physics steps per controller period (1: the controller runs at every step, continuous).
+    every: usize,
+    /// Physics steps taken, and the voltages held since the controller's last update.
+    count: usize,
+    held: [f64; 2],
 }
 
 impl Drive {
@@ -50,7 +62,33 @@ impl Drive {
             rate: [0.0; 2],
             prev_rates: None,
             filter_steps: Self::filter_steps(p),
+            every: p.controller_steps(),
+            count: 0,
+            held: [0.0; 2],
         }
+    }
+
+    /// One physics step of `h` seconds: the controller's voltages (right, left) [V] for the
+    /// setpoints and the wheel rates now [rad/s] — at every step from the rates extrapolated
+    /// to the step's midpoint, or, with a controller period, updated from the rates at its
+    /// instants and held — and those midpoint rates, at which the motors are evaluated.
+    pub fn control(
+        &mut self,
+        setpoint: (f64, f64),
+        rates: [f64; 2],
+        h: f64,
+    ) -> ([f64; 2], [f64; 2]) {
+        let mid = self.midpoint(rates);
+        let u = if self.every <= 1 {
+            self.voltages(setpoint, mid, h)
+        } else {
+            if self.count.is_multiple_of(self.every) {
+                self.held = self.voltages(setpoint, rates, self.every as f64 * h);
+            }
+            self.held
+        };
+        self.count += 1;
+        (u, mid)
     }
 
     /// n_f = max(1, k_eff/I_e): the derivative filter's time constant in steps (module docs).

@@ -78,8 +78,12 @@ pub struct PhysicalProfile {
     pub ticks_per_rev: f64,
     /// Host sample period Δ [s].
     pub period_s: f64,
-    /// Physics (and onboard controller) step [s], ≤ 1 ms.
+    /// Physics step [s], ≤ 1 ms (and ≤ a tenth of the host period).
     pub physics_step_s: f64,
+    /// The onboard controller's own period [s], a whole number of physics steps; absent: it
+    /// runs at every physics step, as a continuous controller (the maps' assumption).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub controller_period_s: Option<f64>,
     /// Largest forward speed [m/s] (for excitations).
     pub v_max: f64,
     /// Largest angular speed [rad/s] (for excitations).
@@ -118,6 +122,7 @@ impl PhysicalProfile {
             ticks_per_rev: 128_000.0 * 2.0 * std::f64::consts::PI * r,
             period_s: 0.1,
             physics_step_s: 1e-3,
+            controller_period_s: None,
             v_max: 1.2,
             w_max: 2.0,
         }
@@ -150,6 +155,7 @@ impl PhysicalProfile {
             ticks_per_rev: 2764.0,
             period_s: 0.02,
             physics_step_s: 2.5e-4,
+            controller_period_s: None,
             v_max: 0.5,
             w_max: 6.0,
         }
@@ -182,6 +188,7 @@ impl PhysicalProfile {
             ticks_per_rev: 4096.0,
             period_s: 0.04,
             physics_step_s: 5e-4,
+            controller_period_s: None,
             v_max: 0.22,
             w_max: 2.8,
         }
@@ -251,6 +258,12 @@ impl PhysicalProfile {
         }
     }
 
+    /// Physics steps per controller period (1 without a controller period).
+    pub fn controller_steps(&self) -> usize {
+        self.controller_period_s
+            .map_or(1, |t| (t / self.physics_step_s).round().max(1.0) as usize)
+    }
+
     /// Checks the constants.
     ///
     /// # Errors
@@ -315,6 +328,18 @@ impl PhysicalProfile {
                 self.physics_step_s,
                 "must be ≤ 1 ms and ≤ a tenth of period_s",
             ));
+        }
+        if let Some(t) = self.controller_period_s {
+            let n = t / self.physics_step_s;
+            if !(t.is_finite() && n >= 0.999 && (n - n.round()).abs() < 1e-6 && t <= self.period_s)
+            {
+                return Err(bad(
+                    &self.name,
+                    "controller_period_s",
+                    t,
+                    "must be a whole number of physics steps, at most period_s",
+                ));
+            }
         }
         Ok(())
     }

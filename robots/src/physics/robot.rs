@@ -9,6 +9,7 @@
 //! command  ← the latest host command whose arrival time (sent + latency) has passed
 //! setpoint ← rate-limited step toward the command (if the limiter is on)
 //! u        ← controller(setpoint, wheel rates at the step's midpoint)        [V]
+//!            (or, with a controller period, updated at its instants and held: `drive`)
 //! u        ← amplifier(u, t): gain sag, one amplifier's gain, voltage clamp  [V]
 //! τ_i      ← k_a (u_i − k_b ω_i)/R_a − B_e ω_i − dry friction(ω_i)           [N·m]
 //! engine   ← τ on each wheel about its axle, −Σ τ on the chassis; one step
@@ -163,8 +164,7 @@ impl PhysicsRobot {
             self.payload_placed = true;
         }
         self.setpoint = fx.limit_rate(self.setpoint, self.command, h);
-        let mid = self.drive.midpoint(self.rates);
-        let u = self.drive.voltages(self.setpoint, mid, h);
+        let (u, mid) = self.drive.control(self.setpoint, self.rates, h);
         let u = fx.amplify(u, t, self.s.duration_s);
         let tau = self.drive.torques(u, mid);
         let fr = fx.friction(mid);
