@@ -130,6 +130,10 @@ pub struct TrackConfig {
     /// The tracking run. Without a `trajectory`, the figure eight preset for the robot.
     #[serde(default)]
     pub track: TrackSettings,
+    /// The physics backend's settings (`wheelid track --backend physics`): seed, stamping
+    /// convention, jitter, encoders, effects (its duration is the run's).
+    #[serde(default)]
+    pub physics: wheelid_robots::physics::PhysicsSettings,
 }
 
 /// Reads and parses a TOML file into `T`, with errors naming the file, line and column.

@@ -11,7 +11,7 @@ use wheelid::config::{
 use wheelid::files::{ModelFile, read_bounds};
 use wheelid::identify::{Estimator, IdentifySettings, identify};
 use wheelid::robots::{
-    Excitation, RobotProfile, SimSettings, TrajectorySpec, simulate_recording, track,
+    Excitation, RobotProfile, SimSettings, TrajectorySpec, simulate_recording, track, track_robot,
 };
 use wheelid::{core::Recording, models, report, solvers};
 
@@ -45,7 +45,8 @@ enum Command {
     /// the model (TOML) and the report. See `examples/configs/run_*.toml`.
     Run(RunArgs),
     /// Figure-eight tracking with the inverse-dynamics controller and adaptive law (thesis
-    /// ch. 3–4) on a simulated robot; reports the distance error.
+    /// ch. 3–4) on a simulated robot (eq. 2.19, or the rigid-body robot with `--backend
+    /// physics`); reports the distance error.
     Track(TrackArgs),
 }
 
@@ -103,14 +104,20 @@ struct TrackArgs {
     /// [track.simulation.effects.*]); the flags below override it.
     #[arg(long)]
     config: Option<PathBuf>,
-    /// Built-in robot.
-    #[arg(long, value_parser = RobotProfile::NAMES)]
+    /// Built-in robot (simulator: pioneer3dx, pioneer3dx_laut, khepera3; physics: pioneer3dx,
+    /// khepera3, burger).
+    #[arg(long)]
     robot: Option<String>,
+    /// Backend: `simulator` (eq. 2.19 with encoders and effects) or `physics` (the rigid-body
+    /// robot of `wheelid_robots::physics`, its settings from `[physics]` in the config; the
+    /// "true" θ shown is the one its constants map to).
+    #[arg(long, value_parser = ["simulator", "physics"], default_value = "simulator")]
+    backend: String,
     /// Identified model file (from `wheelid identify --out`) whose θ seeds θ̂(0).
     #[arg(long)]
     model: Option<PathBuf>,
     /// Initial θ̂(0) as six comma-separated values.
-    #[arg(long, value_delimiter = ',', num_args = 6)]
+    #[arg(long, value_delimiter = ',')]
     theta_hat: Option<Vec<f64>>,
     /// Adaptation gains γ1…γ6, comma-separated (one value: the same for all).
     #[arg(long, value_delimiter = ',')]
@@ -161,14 +168,8 @@ fn run_run(a: RunArgs) -> Result<()> {
 /// `wheelid simulate --backend physics`: the rigid-body robot under a random multisine (or the
 /// config's excitation), written as CSV or a bag.
 fn run_simulate_physics(a: &SimulateArgs, cfg: &SimulateConfig) -> Result<()> {
-    use wheelid::robots::physics::{PhysicalProfile, simulate_physics_recording};
-    let name = a.robot.as_deref().unwrap_or("khepera3");
-    let profile = PhysicalProfile::by_name(name).with_context(|| {
-        format!(
-            "unknown physical profile `{name}` (known: {})",
-            PhysicalProfile::NAMES.join(", ")
-        )
-    })?;
+    use wheelid::robots::physics::simulate_physics_recording;
+    let profile = physical_profile(a.robot.as_deref())?;
     let mut s = cfg.physics.clone();
     if let Some(d) = a.duration {
         s.duration_s = d;
@@ -292,11 +293,76 @@ fn run_simulate(a: SimulateArgs) -> Result<()> {
 
 fn run_track(a: TrackArgs) -> Result<()> {
     let (cfg, base): (TrackConfig, PathBuf) = read_toml_or_default(a.config.as_deref())?;
-    let robot = robot_profile(
-        a.robot.as_deref(),
-        cfg.robot.as_deref(),
-        cfg.profile.as_ref(),
-    )?;
+    let physics = a.backend == "physics";
+    let robot = if physics {
+        physical_profile(a.robot.as_deref().or(cfg.robot.as_deref()))?.model_profile()
+    } else {
+        if let Some(r) = a.robot.as_deref()
+            && !RobotProfile::NAMES.contains(&r)
+        {
+            bail!(
+                "unknown robot `{r}` for the simulator (known: {})",
+                RobotProfile::NAMES.join(", ")
+            );
+        }
+        robot_profile(
+            a.robot.as_deref(),
+            cfg.robot.as_deref(),
+            cfg.profile.as_ref(),
+        )?
+    };
+    let s = track_settings(&a, &cfg, &base, &robot)?;
+    let (r, effects) = if physics {
+        let mut ps = cfg.physics.clone();
+        ps.duration_s = s.duration_s;
+        if let Some(seed) = a.seed {
+            ps.seed = seed;
+        }
+        if a.exact {
+            ps.encoders = false;
+        }
+        let p = physical_profile(Some(&robot.name))?;
+        let mut plant = wheelid::robots::physics::PhysicsRobot::new(&p, &ps)?;
+        let traj = s
+            .trajectory
+            .unwrap_or_else(|| TrajectorySpec::for_profile(&robot, false));
+        let r = track_robot(&mut plant, &traj, &s, [robot.v_max, robot.w_max])?;
+        (r, ps.effects.active())
+    } else {
+        (track(&robot, &s)?, s.simulation.effects.active())
+    };
+    let backend = a.backend.as_str();
+    if a.json {
+        let j = report::track_json(&robot, backend, &effects, &s, &r);
+        println!("{}", serde_json::to_string_pretty(&j)?);
+    } else {
+        print!("{}", report::track_text(&robot, backend, &effects, &s, &r));
+    }
+    if let Some(dir) = &a.plot {
+        list_plots(&wheelid::plot::write_track_plots(&r, dir)?, a.json);
+    }
+    Ok(())
+}
+
+/// The built-in physical profile `name` (default `khepera3`).
+fn physical_profile(name: Option<&str>) -> Result<wheelid::robots::physics::PhysicalProfile> {
+    use wheelid::robots::physics::PhysicalProfile;
+    let name = name.unwrap_or("khepera3");
+    PhysicalProfile::by_name(name).with_context(|| {
+        format!(
+            "unknown physical profile `{name}` (known: {})",
+            PhysicalProfile::NAMES.join(", ")
+        )
+    })
+}
+
+/// The tracking settings: the config's `[track]`, the model file's θ, then the flags.
+fn track_settings(
+    a: &TrackArgs,
+    cfg: &TrackConfig,
+    base: &std::path::Path,
+    robot: &RobotProfile,
+) -> Result<wheelid::robots::TrackSettings> {
     let mut s = cfg.track.clone();
     let model = a
         .model
@@ -307,6 +373,12 @@ fn run_track(a: TrackArgs) -> Result<()> {
         s.theta_hat0.copy_from_slice(&file.theta);
     }
     if let Some(th) = &a.theta_hat {
+        if th.len() != 6 {
+            bail!(
+                "--theta-hat takes 6 comma-separated values, got {}",
+                th.len()
+            );
+        }
         s.theta_hat0.copy_from_slice(th);
     }
     if let Some(g) = &a.gamma {
@@ -323,7 +395,7 @@ fn run_track(a: TrackArgs) -> Result<()> {
         s.adaptation.frozen = f.clone();
     }
     if a.dither {
-        s.trajectory = Some(TrajectorySpec::for_profile(&robot, true));
+        s.trajectory = Some(TrajectorySpec::for_profile(robot, true));
     }
     if let Some(d) = a.duration {
         s.duration_s = d;
@@ -334,19 +406,7 @@ fn run_track(a: TrackArgs) -> Result<()> {
     if a.exact {
         s.simulation.measurement_noise = false;
     }
-    let r = track(&robot, &s)?;
-    if a.json {
-        println!(
-            "{}",
-            serde_json::to_string_pretty(&report::track_json(&robot, &s, &r))?
-        );
-    } else {
-        print!("{}", report::track_text(&robot, &s, &r));
-    }
-    if let Some(dir) = &a.plot {
-        list_plots(&wheelid::plot::write_track_plots(&r, dir)?, a.json);
-    }
-    Ok(())
+    Ok(s)
 }
 
 #[derive(clap::Args)]

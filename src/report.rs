@@ -200,9 +200,20 @@ pub fn to_text(id: &Identification, truth: Option<&[f64]>) -> String {
 /// JSON report of a tracking run:
 /// `{"robot", "theta_true": [6], "theta_hat0": [6], "theta_hat_final": [6],
 ///   "error_m": {"rms", "final", "max"}, "duration_s", "steps", "adaptation": {…}}`.
-pub fn track_json(robot: &RobotProfile, s: &TrackSettings, r: &TrackResult) -> Value {
+///
+/// `backend` is `simulator` (eq. 2.19; `theta_true` its θ) or `physics` (the rigid-body robot;
+/// `theta_true` the θ its constants map to); `effects` the active effects of that backend.
+pub fn track_json(
+    robot: &RobotProfile,
+    backend: &str,
+    effects: &[&str],
+    s: &TrackSettings,
+    r: &TrackResult,
+) -> Value {
     json!({
         "robot": robot.name,
+        "backend": backend,
+        "ground_truth": r.ground_truth,
         "theta_true": robot.theta,
         "theta_hat0": s.theta_hat0,
         "theta_hat_final": r.final_theta_hat(),
@@ -210,19 +221,25 @@ pub fn track_json(robot: &RobotProfile, s: &TrackSettings, r: &TrackResult) -> V
         "duration_s": s.duration_s,
         "steps": r.t.len(),
         "adaptation": s.adaptation,
-        "effects": s.simulation.effects.active(),
+        "effects": effects,
     })
 }
 
-/// Text report of a tracking run.
-pub fn track_text(robot: &RobotProfile, s: &TrackSettings, r: &TrackResult) -> String {
+/// Text report of a tracking run (arguments as [`track_json`]).
+pub fn track_text(
+    robot: &RobotProfile,
+    backend: &str,
+    effects: &[&str],
+    s: &TrackSettings,
+    r: &TrackResult,
+) -> String {
     use std::fmt::Write;
     let mut o = String::new();
     let g = s.adaptation.effective_gamma();
     let adapting = g.iter().any(|&x| x > 0.0);
     let _ = writeln!(
         o,
-        "robot {}  {:.1} s  {} steps of {} s  adaptation {}",
+        "robot {} ({backend})  {:.1} s  {} steps of {} s  adaptation {}",
         robot.name,
         s.duration_s,
         r.t.len(),
@@ -233,19 +250,22 @@ pub fn track_text(robot: &RobotProfile, s: &TrackSettings, r: &TrackResult) -> S
             "off".to_string()
         }
     );
-    let effects = s.simulation.effects.active();
     if !effects.is_empty() {
         let _ = writeln!(o, "effects: {}", effects.join(", "));
     }
-    let _ = writeln!(o, "\nparam      θ̂(0)     θ̂(end)       true");
+    let truth = if backend == "physics" { "map" } else { "true" };
+    let _ = writeln!(o, "\nparam      θ̂(0)     θ̂(end)  {truth:>9}");
     let th_end = r.final_theta_hat();
     for (i, ((t0, t1), tt)) in s.theta_hat0.iter().zip(th_end).zip(robot.theta).enumerate() {
         let _ = writeln!(o, "theta{}  {t0:>9.4}  {t1:>9.4}  {tt:>9.4}", i + 1);
     }
     let _ = writeln!(
         o,
-        "\ndistance error [m]: RMS {:.4}  final {:.4}  max {:.4}",
-        r.summary.rms, r.summary.last, r.summary.max
+        "\ndistance error [m]{}: RMS {:.4}  final {:.4}  max {:.4}",
+        if r.ground_truth { "" } else { " (odometry)" },
+        r.summary.rms,
+        r.summary.last,
+        r.summary.max
     );
     o
 }

@@ -337,6 +337,9 @@ impl Robot for PanicGuard<dyn Robot> {
     fn timing(&self) -> Option<crate::Timing> {
         guarded(|| self.inner.timing()).unwrap_or(None)
     }
+    fn true_pose(&self) -> Option<crate::Pose> {
+        guarded(|| self.inner.true_pose()).unwrap_or(None)
+    }
     fn send(&mut self, v_ref: f64, w_ref: f64) -> std::result::Result<(f64, f64), RobotError> {
         guarded(|| self.inner.send(v_ref, w_ref)).map_err(RobotError::Setting)?
     }

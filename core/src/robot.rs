@@ -138,6 +138,14 @@ pub trait Robot {
         })
     }
 
+    /// The true pose of the robot's reference point now (the state after the last `read`), where
+    /// the backend knows it — a simulation's ground truth, never its odometry — or `None` (a real
+    /// robot, a log; the default). Tracking measures its distance error against it and, without
+    /// it, against the reported (odometry) pose.
+    fn true_pose(&self) -> Option<Pose> {
+        None
+    }
+
     /// Stops the robot (zero command) and releases the link; the default sends (0, 0).
     ///
     /// # Errors

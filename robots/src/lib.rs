@@ -27,5 +27,5 @@ pub use effects::Effects;
 pub use excitation::{Excitation, Multisine, MultisineSpec, Phases, Signal, SumOfSines};
 pub use profile::RobotProfile;
 pub use simulator::{Sample, SimRobot, SimSettings, simulate_recording};
-pub use tracking::{Start, TrackResult, TrackSettings, track};
+pub use tracking::{Start, TrackResult, TrackSettings, track, track_robot};
 pub use trajectory::{DesiredState, FigureEight, FigureEightDither, Trajectory, TrajectorySpec};

@@ -421,6 +421,11 @@ impl Robot for SimRobot {
             wheelid_core::VelocitySampling::Instant
         }
     }
+    /// The simulated state's (x, y, φ) of the point h.
+    fn true_pose(&self) -> Option<Pose> {
+        let [x, y, heading, _, _] = self.s;
+        Some(Pose { x, y, heading })
+    }
     /// Holds (v_ref, ω_ref) for the next period and returns it unchanged.
     fn send(&mut self, v_ref: f64, w_ref: f64) -> std::result::Result<(f64, f64), RobotError> {
         self.sent = (v_ref, w_ref);

@@ -373,10 +373,11 @@ pub enum TrajectorySpec {
 }
 
 impl TrajectorySpec {
-    /// The figure eight (with the dither or not) preset for a robot: the Khepera III's for a
-    /// profile whose name starts with `khepera`, the Pioneer 3-DX's otherwise.
+    /// The figure eight (with the dither or not) preset for a robot: the Khepera III's (at most
+    /// 0.15 m/s) for a profile whose name starts with `khepera` or whose top speed is below
+    /// 0.3 m/s (a TurtleBot3 Burger's 0.22 m/s), the Pioneer 3-DX's otherwise.
     pub fn for_profile(profile: &crate::profile::RobotProfile, dither: bool) -> Self {
-        let khepera = profile.name.starts_with("khepera");
+        let khepera = profile.name.starts_with("khepera") || profile.v_max < 0.3;
         match (khepera, dither) {
             (true, false) => FigureEight::khepera().into(),
             (true, true) => FigureEightDither::khepera().into(),

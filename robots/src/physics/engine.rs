@@ -4,7 +4,8 @@
 //! placed so that the whole robot's is b ahead of the axle), two wheels on revolute impulse
 //! joints at (0, ±d/2) with spin inertia I_e, and one caster ball fixed to the chassis on G's
 //! side of the axle (so the robot stands on three points, statically determinate, and the
-//! wheels carry (1 − b/x_c) of the weight). The ground is a fixed box.
+//! wheels carry (1 − b/x_c) of the weight), with a tail skid clear of the floor on the other
+//! side. The ground is a fixed box.
 //!
 //! Set-up details that bias θ at the % level, and what is done about them (figures from the
 //! unit tests below and from steady turns against the map's steady state):
@@ -24,6 +25,12 @@
 //!   manifolds of two or more points).
 //! * **Load on the wheels**: with a caster at each end the solver may carry the weight on the
 //!   casters and the wheels slip (seen: 93 % slip); one caster on G's side fixes the split.
+//! * **Tipping**: the motors' reaction pitches the chassis; past m g b of torque the caster
+//!   lifts and, with nothing behind the axle, a hard start flips the robot backwards (seen: a
+//!   Pioneer-like robot under saturated tracking commands stood on its tail at 55°). A tail skid
+//!   on the other side of the axle, [`SKID_GAP`]·r above the floor (2.4–3.7° of pitch on the
+//!   built-in profiles), stops it, as a real robot's rear caster or chassis does; it carries no
+//!   load in normal driving, so the three-point load split above stands.
 //! * **Caster drag**: the caster's friction is combined by `Min` with the floor's, i.e. zero.
 //! * **Discretisation**: the step h is ≤ 1 ms and ≤ τ/100; the motor torque over a step is
 //!   evaluated at its midpoint (`drive`), which removes the explicit-Euler bias −h/(2τ) of θ1,
@@ -39,6 +46,9 @@ use super::profile::PhysicalProfile;
 pub const CONTACT_OMEGA_H: f64 = 4.0;
 /// The contacts' damping ratio.
 pub const CONTACT_ZETA: f64 = 1.0;
+
+/// Clearance of the tail skid over the floor, as a fraction of the wheel radius (module docs).
+pub const SKID_GAP: f64 = 0.1;
 
 /// Wheel-on-floor friction coefficient (dry rubber on a hard floor).
 pub const FLOOR_MU: f64 = 1.0;
@@ -117,6 +127,15 @@ impl Engine {
                 .density(0.0)
                 .friction(0.0)
                 .friction_combine_rule(CoefficientCombineRule::Min),
+        );
+        // The tail skid: on the other side of the axle, SKID_GAP · r above the floor.
+        world.insert_collider(
+            ColliderBuilder::ball(p.caster_radius)
+                .translation(Vector::new(-p.caster_x, 0.0, caster_z + SKID_GAP * r))
+                .density(0.0)
+                .friction(0.0)
+                .friction_combine_rule(CoefficientCombineRule::Min),
+            Some(chassis),
         );
         let mut wheels = [chassis; 2];
         let mut wheel_colliders = Vec::with_capacity(2);

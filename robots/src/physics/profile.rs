@@ -207,6 +207,27 @@ impl PhysicalProfile {
         }
     }
 
+    /// The robot as eq. 2.19 sees it: θ from [`PhysicalProfile::theta`], r, d, period, ticks,
+    /// mass and limits from these constants (no speed resolution, no noise: those are the
+    /// physics run's settings). Used to pick a tracking trajectory and to report beside the
+    /// true θ.
+    pub fn model_profile(&self) -> crate::profile::RobotProfile {
+        crate::profile::RobotProfile {
+            name: self.name.clone(),
+            theta: self.theta(),
+            wheel_radius: self.r,
+            track: self.d,
+            period_s: self.period_s,
+            ticks_per_rev: self.ticks_per_rev,
+            speed_resolution: 0.0,
+            wheel_noise_std: 0.0,
+            a: 0.0,
+            mass_kg: self.m,
+            v_max: self.v_max,
+            w_max: self.w_max,
+        }
+    }
+
     /// The model name whose parameterization this controller follows (`wheel-pd`, `vw-pd`).
     pub fn model_name(&self) -> &'static str {
         match self.controller {

@@ -194,6 +194,15 @@ impl Robot for PhysicsRobot {
             Timing::WindowEnd | Timing::WindowMiddle => Timing::WindowEnd,
         })
     }
+    /// The chassis's pose at the axle centre (the engine's, exact).
+    fn true_pose(&self) -> Option<Pose> {
+        let b = self.engine.body();
+        Some(Pose {
+            x: b.x,
+            y: b.y,
+            heading: b.heading,
+        })
+    }
     fn send(&mut self, v_ref: f64, w_ref: f64) -> std::result::Result<(f64, f64), RobotError> {
         if !(v_ref.is_finite() && w_ref.is_finite()) {
             return Err(RobotError::Setting(format!(
