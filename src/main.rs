@@ -531,7 +531,7 @@ struct DiagnoseArgs {
     #[arg(long, value_parser = models::MODEL_NAMES)]
     model: Option<String>,
     /// Candidates to search, comma-separated (default: all eight).
-    #[arg(long, value_delimiter = ',', value_parser = models::Candidate::NAMES)]
+    #[arg(long, value_delimiter = ',', value_parser = clap::builder::PossibleValuesParser::new(models::Candidate::names()))]
     candidates: Option<Vec<String>>,
     /// Most effects added.
     #[arg(long)]

@@ -45,7 +45,7 @@ fn each_candidate_reproduces_its_simulator_effect() {
         let (vm, wm) = (robot.v_max, robot.w_max);
         let cases: Vec<(Candidate, Effects, Vec<f64>)> = vec![
             (
-                Candidate::InputDelay,
+                Candidate::INPUT_DELAY,
                 Effects {
                     input_delay: Some(InputDelay { delay_s: 0.23 }),
                     ..Effects::default()
@@ -53,7 +53,7 @@ fn each_candidate_reproduces_its_simulator_effect() {
                 vec![0.23],
             ),
             (
-                Candidate::AccelerationLimit,
+                Candidate::ACCELERATION_LIMIT,
                 Effects {
                     acceleration_limit: Some(AccelerationLimit {
                         v_accel_max: 0.6 * vm,
@@ -64,7 +64,7 @@ fn each_candidate_reproduces_its_simulator_effect() {
                 vec![0.6 * vm, 0.8 * wm],
             ),
             (
-                Candidate::VelocitySaturation,
+                Candidate::VELOCITY_SATURATION,
                 Effects {
                     velocity_saturation: Some(VelocitySaturation {
                         v_max: 0.7 * vm,
@@ -75,7 +75,7 @@ fn each_candidate_reproduces_its_simulator_effect() {
                 vec![0.7 * vm, 0.25 * wm],
             ),
             (
-                Candidate::CoulombFriction,
+                Candidate::COULOMB_FRICTION,
                 Effects {
                     coulomb_friction: Some(CoulombFriction {
                         v_coulomb: 0.05 * vm,
@@ -86,7 +86,7 @@ fn each_candidate_reproduces_its_simulator_effect() {
                 vec![0.05 * vm, 0.03 * wm],
             ),
             (
-                Candidate::WheelAsymmetry,
+                Candidate::WHEEL_ASYMMETRY,
                 Effects {
                     wheel_asymmetry: Some(WheelAsymmetry { ratio: 1.08 }),
                     ..Effects::default()
@@ -94,7 +94,7 @@ fn each_candidate_reproduces_its_simulator_effect() {
                 vec![1.08],
             ),
             (
-                Candidate::PayloadChange,
+                Candidate::PAYLOAD_CHANGE,
                 Effects {
                     payload_change: Some(PayloadChange::scaled(23.37, th, 1.8)),
                     ..Effects::default()
@@ -102,7 +102,7 @@ fn each_candidate_reproduces_its_simulator_effect() {
                 vec![23.37, 1.8 * th[0], 1.8 * th[1], 1.8 * th[2], 1.8 * th[4]],
             ),
             (
-                Candidate::GainDrift,
+                Candidate::GAIN_DRIFT,
                 Effects {
                     gain_drift: Some(GainDrift { rate_per_s: -0.004 }),
                     ..Effects::default()
@@ -110,7 +110,7 @@ fn each_candidate_reproduces_its_simulator_effect() {
                 vec![-0.004],
             ),
             (
-                Candidate::Slip,
+                Candidate::SLIP,
                 Effects {
                     slip: Some(Slip { k_v: 0.3, k_w: 0.5 }),
                     ..Effects::default()
@@ -143,7 +143,7 @@ fn each_candidate_reproduces_its_simulator_effect() {
                 );
                 // The rate limit's kinks (where the setpoint reaches its target) fall inside the
                 // model's sub-steps, which ramp linearly across them: O(h) there, h ≤ τ/5.
-                let tol = if cand == Candidate::AccelerationLimit {
+                let tol = if cand == Candidate::ACCELERATION_LIMIT {
                     5e-3
                 } else {
                     1e-3

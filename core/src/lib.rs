@@ -9,6 +9,7 @@
 //! **fit** ([`Solver`], in `wheelid-solvers`) → **report** (the `wheelid` crate).
 
 pub mod condition;
+pub mod effect;
 pub mod error;
 pub mod metrics;
 pub mod model;
@@ -20,6 +21,7 @@ pub mod signal;
 pub mod solver;
 
 pub use condition::{ConditionSettings, Conditioned, CutoffChoice};
+pub use effect::{Effect, EffectChannels, Probe, Search, Terms};
 pub use error::{Error, Location, Result};
 pub use model::{
     ChannelInfo, ChannelRegression, DynamicModel, ParamInfo, RegressorModel, Sensitivities,

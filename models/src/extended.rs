@@ -29,14 +29,14 @@
 //! in the order given. Sensitivities: θ and the initial state analytic, the candidates' parameters
 //! by forward differences ([`Extended::sensitivities_of`]).
 
-use serde::{Deserialize, Serialize};
 use wheelid_core::{
     ChannelInfo, CommandHold, DynamicModel, Error, ParamInfo, Recording, Result, Sensitivities,
-    Simulation, VelocitySampling,
+    Simulation, Terms, VelocitySampling,
 };
 
 use crate::delay::{holding_command, merged_grid};
 use crate::dynamics::StepCommand;
+pub use crate::effects::Candidate;
 use crate::{dynamics, regressor};
 
 /// Shortest time constant θ1/θ4, θ2/θ6 the extended model accepts [s].
@@ -45,159 +45,12 @@ pub const MIN_TIME_CONSTANT: f64 = 1e-3;
 /// Smoothing of the Coulomb friction's sign: 2 mm/s and 0.01 rad/s (as the simulator).
 pub const FRICTION_EPS: [f64; 2] = [0.002, 0.01];
 
-macro_rules! p {
-    ($name:literal, $unit:literal, $desc:literal) => {
-        ParamInfo {
-            name: $name,
-            unit: $unit,
-            description: $desc,
-        }
-    };
-}
-
-static DELAY: [ParamInfo; 1] = [p!("delay_s", "s", "dead time of the commands")];
-static ACCEL: [ParamInfo; 2] = [
-    p!(
-        "v_accel_max",
-        "m/s²",
-        "largest rate of change of the v setpoint"
-    ),
-    p!(
-        "w_accel_max",
-        "rad/s²",
-        "largest rate of change of the ω setpoint"
-    ),
-];
-static SAT: [ParamInfo; 2] = [
-    p!("v_max", "m/s", "largest |v| setpoint the base accepts"),
-    p!("w_max", "rad/s", "largest |ω| setpoint the base accepts"),
-];
-static COULOMB: [ParamInfo; 2] = [
-    p!("v_coulomb", "m/s", "dry friction in forward command units"),
-    p!(
-        "w_coulomb",
-        "rad/s",
-        "dry friction in turning command units"
-    ),
-];
-static ASYM: [ParamInfo; 1] = [p!("ratio", "-", "right/left wheel gain ratio")];
-static PAYLOAD: [ParamInfo; 5] = [
-    p!("time_s", "s", "when the payload changes"),
-    p!("theta1_after", "s", "θ1 after the change"),
-    p!("theta2_after", "s", "θ2 after the change"),
-    p!("theta3_after", "s·m/rad²", "θ3 after the change"),
-    p!("theta5_after", "s/m", "θ5 after the change"),
-];
-static DRIFT: [ParamInfo; 1] = [p!(
-    "rate_per_s",
-    "1/s",
-    "relative change of the gains per second"
-)];
-static SLIP: [ParamInfo; 2] = [
-    p!("k_v", "s/rad", "forward slip per unit v·|ω|"),
-    p!("k_w", "s/m", "turning slip per unit |v|·ω"),
-];
-
-/// One candidate physics (the names of `wheelid_robots::effects`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Candidate {
-    /// Dead time of the commands.
-    InputDelay,
-    /// Rate limit on the setpoint.
-    AccelerationLimit,
-    /// Clip of the setpoint.
-    VelocitySaturation,
-    /// Dry friction / dead zone.
-    CoulombFriction,
-    /// Left/right wheel gain mismatch.
-    WheelAsymmetry,
-    /// θ1, θ2, θ3, θ5 change at a time.
-    PayloadChange,
-    /// Gains change slowly over the run.
-    GainDrift,
-    /// Losses growing with v·|ω|.
-    Slip,
-}
-
-impl Candidate {
-    /// Every candidate.
-    pub const ALL: [Candidate; 8] = [
-        Candidate::InputDelay,
-        Candidate::AccelerationLimit,
-        Candidate::VelocitySaturation,
-        Candidate::CoulombFriction,
-        Candidate::WheelAsymmetry,
-        Candidate::PayloadChange,
-        Candidate::GainDrift,
-        Candidate::Slip,
-    ];
-
-    /// Every candidate's name, in [`Candidate::ALL`] order.
-    pub const NAMES: [&'static str; 8] = [
-        "input_delay",
-        "acceleration_limit",
-        "velocity_saturation",
-        "coulomb_friction",
-        "wheel_asymmetry",
-        "payload_change",
-        "gain_drift",
-        "slip",
-    ];
-
-    /// The candidate called `name` (one of [`Candidate::NAMES`]).
-    pub fn by_name(name: &str) -> Option<Self> {
-        Self::ALL.into_iter().find(|c| c.name() == name)
-    }
-
-    /// The name (`input_delay`, …), as in the simulator's effects and the diagnosis report.
-    pub fn name(self) -> &'static str {
-        match self {
-            Candidate::InputDelay => "input_delay",
-            Candidate::AccelerationLimit => "acceleration_limit",
-            Candidate::VelocitySaturation => "velocity_saturation",
-            Candidate::CoulombFriction => "coulomb_friction",
-            Candidate::WheelAsymmetry => "wheel_asymmetry",
-            Candidate::PayloadChange => "payload_change",
-            Candidate::GainDrift => "gain_drift",
-            Candidate::Slip => "slip",
-        }
-    }
-
-    /// The candidate's own parameters (appended after θ).
-    pub fn params(self) -> &'static [ParamInfo] {
-        match self {
-            Candidate::InputDelay => &DELAY,
-            Candidate::AccelerationLimit => &ACCEL,
-            Candidate::VelocitySaturation => &SAT,
-            Candidate::CoulombFriction => &COULOMB,
-            Candidate::WheelAsymmetry => &ASYM,
-            Candidate::PayloadChange => &PAYLOAD,
-            Candidate::GainDrift => &DRIFT,
-            Candidate::Slip => &SLIP,
-        }
-    }
-}
-
 /// Eq. 2.19 with a set of candidates (`extended`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Extended {
     candidates: Vec<Candidate>,
     params: Vec<ParamInfo>,
     track: f64,
-}
-
-/// The candidates' values parsed from θ.
-#[derive(Debug, Clone, Copy, Default)]
-struct Physics {
-    delay: f64,
-    accel: Option<[f64; 2]>,
-    sat: Option<[f64; 2]>,
-    coulomb: [f64; 2],
-    ratio: Option<f64>,
-    payload: Option<(f64, [f64; 4])>,
-    drift: f64,
-    slip: [f64; 2],
 }
 
 impl Extended {
@@ -236,7 +89,7 @@ impl Extended {
         &self.candidates
     }
 
-    fn physics(&self, theta: &[f64]) -> Result<([f64; 6], Physics)> {
+    fn physics(&self, theta: &[f64]) -> Result<([f64; 6], Terms)> {
         if theta.len() != self.params.len() || theta.iter().any(|x| !x.is_finite()) {
             return Err(Error::InvalidSetting(format!(
                 "θ of the extended model has {} finite values, got {theta:?}",
@@ -254,31 +107,12 @@ impl Extended {
                 )));
             }
         }
-        let mut ph = Physics::default();
+        let mut ph = Terms::default();
         let mut i = 6;
         for c in &self.candidates {
-            let x = &theta[i..i + c.params().len()];
-            match c {
-                Candidate::InputDelay => ph.delay = x[0],
-                Candidate::AccelerationLimit => ph.accel = Some([x[0].abs(), x[1].abs()]),
-                Candidate::VelocitySaturation => ph.sat = Some([x[0].abs(), x[1].abs()]),
-                Candidate::CoulombFriction => ph.coulomb = [x[0], x[1]],
-                Candidate::WheelAsymmetry => ph.ratio = Some(x[0]),
-                Candidate::PayloadChange => ph.payload = Some((x[0], [x[1], x[2], x[3], x[4]])),
-                Candidate::GainDrift => ph.drift = x[0],
-                Candidate::Slip => ph.slip = [x[0], x[1]],
-            }
-            i += c.params().len();
-        }
-        if let Some((_, a)) = ph.payload
-            && (a[0] == 0.0 || a[1] == 0.0)
-        {
-            return Err(Error::InvalidSetting(
-                "θ1, θ2 after the payload must be ≠ 0".into(),
-            ));
-        }
-        if ph.ratio.is_some_and(|r| r <= -1.0 + 1e-9) {
-            return Err(Error::InvalidSetting("wheel ratio must be > −1".into()));
+            let n = c.params().len();
+            c.effect().apply(&theta[i..i + n], &mut ph)?;
+            i += n;
         }
         Ok((th, ph))
     }
@@ -576,7 +410,7 @@ impl Extended {
     fn integrate<const N: usize, const M: usize>(
         &self,
         th0: &[f64; 6],
-        ph: &Physics,
+        ph: &Terms,
         rec: &Recording,
         initial: &[f64],
     ) -> Result<[Vec<f64>; N]> {
@@ -812,7 +646,7 @@ mod tests {
             let mut th7 = THETA.to_vec();
             th7.push(0.137);
             let delayed = InputDelay.simulate(&th7, &rec, &x0).expect("sim");
-            let e = Extended::new(&[Candidate::InputDelay], 0.34).expect("model");
+            let e = Extended::new(&[Candidate::INPUT_DELAY], 0.34).expect("model");
             let got_d = e.simulate(&th7, &rec, &x0).expect("sim");
             for ch in 0..2 {
                 for k in 0..rec.len() {
@@ -829,7 +663,7 @@ mod tests {
         let rec = recording(false, 101, |_| (1.0, 0.0));
         let tau = THETA[0] / THETA[3];
         // Saturation at 0.4 m/s: v = (0.4/θ4)(1 − e^{−t/τ}).
-        let e = Extended::new(&[Candidate::VelocitySaturation], 0.34).expect("model");
+        let e = Extended::new(&[Candidate::VELOCITY_SATURATION], 0.34).expect("model");
         let mut th = THETA.to_vec();
         th.extend([0.4, 5.0]);
         let [v, _] = <[Vec<f64>; 2]>::try_from(e.simulate(&th, &rec, &[0.0, 0.0]).expect("sim"))
@@ -841,7 +675,7 @@ mod tests {
         }
         // Rate limit 0.5 m/s² (setpoint ramps for 2 s): θ1 v̇ + θ4 v = a t →
         // v = (a/θ4)(t − τ(1 − e^{−t/τ})) while ramping.
-        let e = Extended::new(&[Candidate::AccelerationLimit], 0.34).expect("model");
+        let e = Extended::new(&[Candidate::ACCELERATION_LIMIT], 0.34).expect("model");
         let mut th = THETA.to_vec();
         th.extend([0.5, 5.0]);
         let [v, _] = <[Vec<f64>; 2]>::try_from(e.simulate(&th, &rec, &[0.0, 0.0]).expect("sim"))
@@ -860,22 +694,22 @@ mod tests {
         let x0 = [0.15, 0.3];
         let cases: Vec<(Vec<Candidate>, Vec<f64>)> = vec![
             (vec![], vec![]),
-            (vec![Candidate::InputDelay], vec![0.23]),
-            (vec![Candidate::VelocitySaturation], vec![0.35, 0.6]),
-            (vec![Candidate::AccelerationLimit], vec![0.8, 2.0]),
-            (vec![Candidate::CoulombFriction], vec![0.02, 0.05]),
-            (vec![Candidate::WheelAsymmetry], vec![1.1]),
+            (vec![Candidate::INPUT_DELAY], vec![0.23]),
+            (vec![Candidate::VELOCITY_SATURATION], vec![0.35, 0.6]),
+            (vec![Candidate::ACCELERATION_LIMIT], vec![0.8, 2.0]),
+            (vec![Candidate::COULOMB_FRICTION], vec![0.02, 0.05]),
+            (vec![Candidate::WHEEL_ASYMMETRY], vec![1.1]),
             (
-                vec![Candidate::PayloadChange],
+                vec![Candidate::PAYLOAD_CHANGE],
                 vec![3.3, 0.3, 0.3, -0.04, 0.1],
             ),
-            (vec![Candidate::GainDrift], vec![0.01]),
-            (vec![Candidate::Slip], vec![0.05, 0.1]),
+            (vec![Candidate::GAIN_DRIFT], vec![0.01]),
+            (vec![Candidate::SLIP], vec![0.05, 0.1]),
             (
                 vec![
-                    Candidate::InputDelay,
-                    Candidate::AccelerationLimit,
-                    Candidate::VelocitySaturation,
+                    Candidate::INPUT_DELAY,
+                    Candidate::ACCELERATION_LIMIT,
+                    Candidate::VELOCITY_SATURATION,
                 ],
                 vec![0.17, 0.8, 2.0, 0.35, 0.6],
             ),

@@ -22,6 +22,7 @@
 
 pub mod delay;
 pub mod dynamics;
+pub mod effects;
 pub mod extended;
 pub mod offset;
 pub mod physical;

@@ -123,7 +123,7 @@ fn rms(x: impl Iterator<Item = f64>) -> f64 {
 
 /// The `q` quantile of |x| (0 for no samples).
 fn quantile(x: &[f64], q: f64) -> f64 {
-    super::abs_quantile(x.iter().copied(), q)
+    wheelid_core::effect::abs_quantile(x.iter().copied(), q)
 }
 
 /// Power per band of a series sampled every `dt` (periodogram).

@@ -49,11 +49,13 @@ use indicatif::{ProgressBar, ProgressStyle};
 use nalgebra::DMatrix;
 use serde::Serialize;
 use wheelid_core::condition::{self, ConditionSettings};
+use wheelid_core::effect::{EffectChannels, FitData, Probe, ProbeData, Search};
 use wheelid_core::residual::holm;
 use wheelid_core::{
     ChannelInfo, DynamicModel, ParamInfo, Recording, RegressorModel, Result as CoreResult,
     Sensitivities, Simulation, metrics,
 };
+use wheelid_models::effects::NEVER;
 use wheelid_models::{Candidate, Extended};
 use wheelid_solvers::{Ols, OutputError, OutputErrorFit};
 
@@ -114,7 +116,7 @@ impl Default for DiagnoseSettings {
             max_lag_s: 2.0,
             min_improvement: 0.05,
             max_effects: 3,
-            candidates: Candidate::ALL.to_vec(),
+            candidates: Candidate::all(),
             track_m: None,
             progress: false,
         }
@@ -299,9 +301,6 @@ const PROBE_FRACTIONS: [f64; 3] = [0.7, 0.85, 1.0];
 /// less than a standard error below it, and the score tests project the fit's Jacobian out.
 const NOMINAL_TOLERANCE: f64 = 1e-6;
 
-/// A value far beyond any command: a limit at this level never binds.
-const NEVER: f64 = 1e6;
-
 /// The extended model with some parameters held: the fitter sees only the free ones.
 struct Pinned<'a> {
     inner: &'a Extended,
@@ -479,16 +478,6 @@ impl Data {
     }
 }
 
-/// Robust level: the `q` quantile of |x|.
-fn abs_quantile(x: impl Iterator<Item = f64>, q: f64) -> f64 {
-    let mut v: Vec<f64> = x.map(f64::abs).collect();
-    if v.is_empty() {
-        return 0.0;
-    }
-    v.sort_by(f64::total_cmp);
-    v[((v.len() - 1) as f64 * q).round() as usize]
-}
-
 /// The wheel track from the metadata: `track`, a `kinematics` line with `track X`, or the
 /// built-in profile named by `robot`.
 fn track_from_meta(rec: &Recording) -> Option<f64> {
@@ -518,86 +507,13 @@ fn track_from_meta(rec: &Recording) -> Option<f64> {
         .map(|p| p.track)
 }
 
-/// Fraction of the samples during which a setpoint slewing at `rate` towards command `ch`
-/// (v_ref, ω_ref, held between samples) has not caught up with it: how often a rate limit
-/// binds.
-fn slew_binding(recs: &[Recording], ch: usize, rate: f64) -> f64 {
-    let (mut bound, mut total) = (0usize, 0usize);
-    for r in recs {
-        let u = if ch == 0 { &r.v_ref } else { &r.w_ref };
-        let mut s = u[0];
-        for k in 1..u.len() {
-            let step = rate * (r.t[k] - r.t[k - 1]);
-            let gap = u[k - 1] - s;
-            s += gap.clamp(-step, step);
-            bound += usize::from(gap.abs() > step);
-            total += 1;
-        }
-    }
-    bound as f64 / total.max(1) as f64
-}
-
-/// For a limit (`velocity_saturation`, `acceleration_limit`) at `level` on channel `ch`, the
-/// fraction of the samples where it binds; `None` for other candidates.
-fn limit_binding(recs: &[Recording], c: Candidate, ch: usize, level: f64) -> Option<f64> {
-    match c {
-        Candidate::VelocitySaturation => {
-            let (over, n) = recs
-                .iter()
-                .flat_map(|r| {
-                    if ch == 0 {
-                        r.v_ref.iter()
-                    } else {
-                        r.w_ref.iter()
-                    }
-                })
-                .fold((0usize, 0usize), |(a, n), x| {
-                    (a + usize::from(x.abs() > level), n + 1)
-                });
-            Some(over as f64 / n.max(1) as f64)
-        }
-        Candidate::AccelerationLimit => Some(slew_binding(recs, ch, level)),
-        _ => None,
-    }
-}
-
-/// Null values of a candidate's parameters given θ (the extended model is then the current
-/// one).
-fn null_values(c: Candidate, theta: &[f64], t_mid: f64) -> Vec<f64> {
-    match c {
-        Candidate::InputDelay => vec![0.0],
-        Candidate::AccelerationLimit | Candidate::VelocitySaturation => vec![NEVER, NEVER],
-        Candidate::CoulombFriction | Candidate::Slip => vec![0.0, 0.0],
-        Candidate::WheelAsymmetry => vec![1.0],
-        Candidate::PayloadChange => vec![t_mid, theta[0], theta[1], theta[2], theta[4]],
-        Candidate::GainDrift => vec![0.0],
-    }
-}
-
 /// Bounds of the whole θ of the model with `candidates`: θ1…θ6 free, then each candidate's.
 fn model_bounds(candidates: &[Candidate], t_range: (f64, f64)) -> Vec<(f64, f64)> {
     let mut b = vec![(f64::NEG_INFINITY, f64::INFINITY); 6];
     for c in candidates {
-        b.extend(candidate_bounds(*c, t_range));
+        b.extend(c.effect().bounds(t_range));
     }
     b
-}
-
-/// Bounds of a candidate's parameters for the fit.
-fn candidate_bounds(c: Candidate, t_range: (f64, f64)) -> Vec<(f64, f64)> {
-    let inf = f64::INFINITY;
-    match c {
-        Candidate::InputDelay => vec![(0.0, 2.0)],
-        Candidate::AccelerationLimit | Candidate::VelocitySaturation => {
-            vec![(1e-6, inf), (1e-6, inf)]
-        }
-        Candidate::CoulombFriction | Candidate::Slip => vec![(0.0, inf), (0.0, inf)],
-        Candidate::WheelAsymmetry => vec![(0.2, 5.0)],
-        Candidate::PayloadChange => {
-            vec![t_range, (-inf, inf), (-inf, inf), (-inf, inf), (-inf, inf)]
-        }
-        Candidate::GainDrift => vec![(-inf, inf)],
-    }
 }
 
 /// A candidate's pattern columns and the guesses they come with.
@@ -617,8 +533,8 @@ struct Pattern {
     grid: usize,
 }
 
-/// Builds the fingerprints of `c` at the current model; `None` if the candidate cannot act on
-/// these data (no probe level binds, no track for the asymmetry).
+/// Builds the fingerprints of `c` at the current model from its [`Probe`]; `None` if the
+/// candidate cannot act on these data (no probe level binds, no track for the asymmetry).
 fn patterns(c: Candidate, data: &Data, cur: &Current) -> Option<Vec<Pattern>> {
     let frame = data.frame();
     let mut cands = cur.candidates.clone();
@@ -626,7 +542,7 @@ fn patterns(c: Candidate, data: &Data, cur: &Current) -> Option<Vec<Pattern>> {
     let model = data.model(&cands);
     let th6 = &cur.theta[..6];
     let (t_lo, t_hi) = data.span();
-    let null = null_values(c, th6, 0.5 * (t_lo + t_hi));
+    let null = c.effect().null(th6, 0.5 * (t_lo + t_hi));
     let with = |vals: &[f64]| {
         let mut th = cur.theta.clone();
         th.extend_from_slice(vals);
@@ -638,21 +554,6 @@ fn patterns(c: Candidate, data: &Data, cur: &Current) -> Option<Vec<Pattern>> {
         let y = with(&v)?;
         Some(frame.flatten(&score::difference(&y, &cur.sim, h)))
     };
-    let cmd = |ch: usize| {
-        data.recs.iter().flat_map(move |r| {
-            if ch == 0 {
-                r.v_ref.iter().copied()
-            } else {
-                r.w_ref.iter().copied()
-            }
-        })
-    };
-    let meas = |ch: usize| {
-        data.recs
-            .iter()
-            .flat_map(move |r| if ch == 0 { r.v.iter() } else { r.w.iter() }.copied())
-    };
-    let gain = [th6[3], th6[5]];
     let single =
         |cols: Vec<nalgebra::DVector<f64>>, params: Vec<usize>, evidence: String| Pattern {
             candidate: c,
@@ -663,137 +564,69 @@ fn patterns(c: Candidate, data: &Data, cur: &Current) -> Option<Vec<Pattern>> {
             evidence,
             grid: 1,
         };
-    match c {
-        Candidate::InputDelay => {
-            let h = 0.5 * data.dt;
-            Some(vec![single(
-                vec![fd(&null, 0, h)?],
-                vec![0],
-                "the residual follows the commands' changes".into(),
-            )])
-        }
-        Candidate::CoulombFriction => {
-            let cols = (0..2)
-                .map(|ch| fd(&null, ch, 1e-3 * abs_quantile(cmd(ch), 0.9).max(1e-6)))
+    let probe_data = ProbeData {
+        recordings: &data.recs,
+        accel: &data.accel,
+        theta: th6,
+        dt: data.dt,
+        track: data.track,
+    };
+    match c.effect().probe(&probe_data)? {
+        Probe::Gradient(steps) => {
+            let cols = steps
+                .iter()
+                .map(|&(j, h)| fd(&null, j, h))
                 .collect::<Option<Vec<_>>>()?;
-            Some(vec![single(
-                cols,
-                vec![0, 1],
-                "the residual opposes the direction of travel".into(),
-            )])
+            let params = steps.iter().map(|&(j, _)| j).collect();
+            Some(vec![single(cols, params, c.effect().evidence().into())])
         }
-        Candidate::Slip => {
-            let cols = (0..2)
-                .map(|ch| fd(&null, ch, 1e-3))
-                .collect::<Option<Vec<_>>>()?;
-            Some(vec![single(
-                cols,
-                vec![0, 1],
-                "the residual grows with |v·ω|".into(),
-            )])
-        }
-        Candidate::WheelAsymmetry => {
-            data.track?;
-            Some(vec![single(
-                vec![fd(&null, 0, 1e-3)?],
-                vec![0],
-                "ω's residual follows v_ref".into(),
-            )])
-        }
-        Candidate::GainDrift => Some(vec![single(
-            vec![fd(&null, 0, 1e-5)?],
-            vec![0],
-            "the residual scales with the command as time goes on".into(),
-        )]),
-        Candidate::VelocitySaturation | Candidate::AccelerationLimit => {
-            // Probe levels in setpoint units, from the measured response.
-            let sat = c == Candidate::VelocitySaturation;
-            let mut params = Vec::new();
-            let mut probe = null.clone();
-            let mut words = Vec::new();
-            for ch in 0..2 {
-                let name = ["v", "ω"][ch];
-                let (level, binding) = if sat {
-                    let y = abs_quantile(meas(ch), 0.995);
-                    let level = gain[ch].abs() * y;
-                    let u: Vec<f64> = cmd(ch).collect();
-                    let over = u.iter().filter(|x| x.abs() > 1.05 * level).count() as f64
-                        / u.len().max(1) as f64;
-                    if over >= 0.01 {
-                        words.push(format!(
-                            "|{name}| stays within {y:.3} while the command exceeds the \
-                             matching setpoint {level:.3} on {:.1} % of the samples",
-                            100.0 * over
-                        ));
-                    }
-                    (level, over >= 0.01)
-                } else {
-                    let acc = data.accel.iter().flat_map(|a| a[ch].iter().copied());
-                    let a = abs_quantile(acc, 0.995);
-                    let level = gain[ch].abs() * a;
-                    let over = slew_binding(&data.recs, ch, level);
-                    if over >= 0.01 {
-                        words.push(format!(
-                            "{name}'s measured acceleration tops out at {a:.3} while the \
-                             commands step faster on {:.1} % of the samples",
-                            100.0 * over
-                        ));
-                    }
-                    (level, over >= 0.01)
-                };
-                if binding && level > 0.0 {
-                    probe[ch] = level;
-                    params.push(ch);
-                }
-            }
-            if params.is_empty() {
-                return None;
-            }
-            // The level read off a nominal fit that has absorbed part of the limit sits above
-            // the true one: probed at a few fractions of it, the best taken (Bonferroni).
+        // The level read off a nominal fit that has absorbed part of the limit sits above the
+        // true one: probed at a few fractions of it, the best taken (Bonferroni).
+        Probe::Levels { levels, evidence } => {
+            let params: Vec<usize> = levels.iter().map(|&(j, _)| j).collect();
             let mut out = Vec::new();
             for f in PROBE_FRACTIONS {
                 let mut v = null.clone();
-                for &ch in &params {
-                    v[ch] = f * probe[ch];
+                for &(j, level) in &levels {
+                    v[j] = f * level;
                 }
                 let cols = params
                     .iter()
-                    .map(|&ch| {
+                    .map(|&j| {
                         let mut one = null.clone();
-                        one[ch] = v[ch];
+                        one[j] = v[j];
                         with(&one).map(|y| frame.flatten(&score::difference(&y, &cur.sim, 1.0)))
                     })
                     .collect::<Option<Vec<_>>>()?;
-                let mut p = single(cols, params.clone(), words.join("; "));
+                let mut p = single(cols, params.clone(), evidence.clone());
                 p.guess = v;
                 p.grid = PROBE_FRACTIONS.len();
                 out.push(p);
             }
             Some(out)
         }
-        Candidate::PayloadChange => {
-            // A grid of change times over the middle of the run, one thread per time (the
-            // longest fingerprint: four simulations each).
-            let grid = 5;
+        // A grid of change times over the middle of the run, one thread per time.
+        Probe::TimeGrid { time, n, columns } => {
             let pattern_at = |g: usize| {
-                let ts = t_lo + (t_hi - t_lo) * g as f64 / (grid + 1) as f64;
+                let ts = t_lo + (t_hi - t_lo) * g as f64 / (n + 1) as f64;
                 let mut vals = null.clone();
-                vals[0] = ts;
-                let cols = (1..5)
-                    .map(|j| fd(&vals, j, 1e-3 * vals[j].abs().max(1e-3)))
+                vals[time] = ts;
+                let cols = columns
+                    .iter()
+                    .map(|&(j, rel)| fd(&vals, j, rel * vals[j].abs().max(1e-3)))
                     .collect::<Option<Vec<_>>>()?;
+                let params = columns.iter().map(|&(j, _)| j).collect();
                 let mut p = single(
                     cols,
-                    vec![1, 2, 3, 4],
+                    params,
                     format!("the dynamics change around t = {ts:.1} s"),
                 );
                 p.guess = vals;
-                p.grid = grid;
+                p.grid = n;
                 Some(p)
             };
             std::thread::scope(|scope| {
-                let handles: Vec<_> = (1..=grid)
+                let handles: Vec<_> = (1..=n)
                     .map(|g| {
                         let pattern_at = &pattern_at;
                         scope.spawn(move || pattern_at(g))
@@ -832,32 +665,22 @@ fn fingerprint(
         };
         let p_value = (s.p_value * pattern.grid as f64).min(1.0);
         // Channels: columns whose own z is large; the others stay at their null.
-        let two = matches!(
-            c,
-            Candidate::AccelerationLimit
-                | Candidate::VelocitySaturation
-                | Candidate::CoulombFriction
-                | Candidate::Slip
-        );
-        if two {
+        if let EffectChannels::Each { positive } = c.effect().channels() {
             // Every channel the pattern reaches is fitted (a friction or a loss only where the
             // residual asks for a positive one); insignificant ones are dropped after the fit.
             let active: Vec<usize> = pattern
                 .param_of_col
                 .iter()
                 .zip(&s.beta)
-                .filter(|(_, b)| {
-                    !matches!(c, Candidate::CoulombFriction | Candidate::Slip) || **b > 0.0
-                })
+                .filter(|(_, b)| !positive || **b > 0.0)
                 .map(|(&j, _)| j)
                 .collect();
             pattern.inactive = (0..2).filter(|j| !active.contains(j)).collect();
         }
         // First guess: the probe level, or one Gauss–Newton step from the null.
-        for (col, &j) in pattern.param_of_col.iter().enumerate() {
-            match c {
-                Candidate::VelocitySaturation | Candidate::AccelerationLimit => {}
-                _ => pattern.guess[j] += s.beta[col],
+        if !matches!(c.effect().search(), Search::Limit { .. }) {
+            for (col, &j) in pattern.param_of_col.iter().enumerate() {
+                pattern.guess[j] += s.beta[col];
             }
         }
         let better = best
@@ -874,24 +697,19 @@ fn fingerprint(
     best
 }
 
-/// The channels a candidate acts on: both, ω only for the wheel asymmetry (v_ref leaking into
-/// ω), or for two-channel candidates those whose parameter is `active`.
+/// The channels a candidate acts on ([`EffectChannels`]): for a per-channel one, those whose
+/// parameter is `active`.
 fn channels_of(c: Candidate, active: impl Fn(usize) -> bool) -> Vec<String> {
-    match c {
-        Candidate::AccelerationLimit
-        | Candidate::VelocitySaturation
-        | Candidate::CoulombFriction
-        | Candidate::Slip => (0..2)
+    match c.effect().channels() {
+        EffectChannels::Each { .. } => (0..2)
             .filter(|&j| active(j))
             .map(|j| ["v", "w"][j].to_owned())
             .collect(),
-        Candidate::WheelAsymmetry => vec!["w".into()],
-        _ => vec!["v".into(), "w".into()],
+        EffectChannels::Omega => vec!["w".into()],
+        EffectChannels::Both => vec!["v".into(), "w".into()],
     }
 }
 
-/// Fits the current model plus `nominee` on the training blocks; returns the new state and
-/// the fit.
 /// Where a candidate's fit starts: θ, bounds, held parameters, and the training cost there
 /// (the screen that orders the fits).
 struct Start {
@@ -918,7 +736,8 @@ fn start_candidate(
     let (t_lo, t_hi) = data.span();
     let margin = 0.05 * (t_hi - t_lo);
     let mut bounds = model_bounds(&cur.candidates, (t_lo + margin, t_hi - margin));
-    let cb = candidate_bounds(c, (t_lo + margin, t_hi - margin));
+    let cb = c.effect().bounds((t_lo + margin, t_hi - margin));
+    let search = c.effect().search();
     for (g, &(lo, hi)) in guess.iter_mut().zip(&cb) {
         let span = if hi.is_finite() && lo.is_finite() {
             1e-3 * (hi - lo)
@@ -928,7 +747,7 @@ fn start_candidate(
         *g = g.clamp(lo + span, hi - span);
     }
     // A friction or a loss that the residual asks to be negative is no such physics.
-    if matches!(c, Candidate::CoulombFriction | Candidate::Slip)
+    if c.effect().channels() == (EffectChannels::Each { positive: true })
         && nominee.pattern.inactive.len() == 2
     {
         return Err(format!(
@@ -948,15 +767,8 @@ fn start_candidate(
     };
     // A Gauss–Newton step from the null can overshoot far (a pattern nearly absorbed by θ):
     // it is shortened to the best of a few fractions by the training cost.
-    if matches!(
-        c,
-        Candidate::CoulombFriction
-            | Candidate::Slip
-            | Candidate::WheelAsymmetry
-            | Candidate::GainDrift
-            | Candidate::PayloadChange
-    ) {
-        let null = null_values(c, &cur.theta, theta[base]);
+    if matches!(search, Search::Smooth | Search::ChangeTime) {
+        let null = c.effect().null(&cur.theta, theta[base]);
         let step: Vec<f64> = (0..null.len())
             .map(|j| {
                 if nominee.pattern.inactive.contains(&j) {
@@ -982,17 +794,14 @@ fn start_candidate(
         }
     }
     // A limit's probe level is a rough reading of the data: scaled on a grid first.
-    if matches!(
-        c,
-        Candidate::VelocitySaturation | Candidate::AccelerationLimit
-    ) {
+    if matches!(search, Search::Limit { .. }) {
         let active: Vec<usize> = (0..2)
             .filter(|j| !nominee.pattern.inactive.contains(j))
             .collect();
         theta = level_grid(&theta, base, &active, &training_cost);
     }
     // A dead time is searched on a grid first: its cost has many local minima.
-    if c == Candidate::InputDelay {
+    if search == Search::DeadTime {
         let mut best = (f64::INFINITY, guess[0]);
         let mut d = 0.5 * data.dt;
         let mut grid = vec![guess[0]];
@@ -1013,12 +822,12 @@ fn start_candidate(
     let mut pinned = cur.pinned.clone();
     for &j in &nominee.pattern.inactive {
         pinned.push(base + j);
-        theta[base + j] = null_values(c, &cur.theta, 0.0)[j];
+        theta[base + j] = c.effect().null(&cur.theta, 0.0)[j];
     }
     // A change time is not fitted by gradient: the training cost is flat while it sweeps a
     // validation block. It is held, θ fitted, then the time scanned on a fine grid with that θ
     // (the middle of the flat minimum taken), and θ fitted again if it moved.
-    if c == Candidate::PayloadChange {
+    if search == Search::ChangeTime {
         pinned.push(base);
     }
     let cost = training_cost(&theta);
@@ -1083,13 +892,8 @@ fn fit_candidate(
     let (t_lo, t_hi) = data.span();
     let margin = 0.05 * (t_hi - t_lo);
     let run = |theta: &[f64], pinned: &[usize]| fit_pinned(data, &model, theta, pinned, &bounds);
-    let two = matches!(
-        c,
-        Candidate::AccelerationLimit
-            | Candidate::VelocitySaturation
-            | Candidate::CoulombFriction
-            | Candidate::Slip
-    );
+    let search = c.effect().search();
+    let two = matches!(c.effect().channels(), EffectChannels::Each { .. });
     let both_free = (0..2).all(|j| !pinned.contains(&(base + j)));
     // Compared at the common (nominal) weights: each fit's own cost is weighted by its own
     // noise levels.
@@ -1105,7 +909,7 @@ fn fit_candidate(
     // screen: a fast lag with a ramp also imitates a dead time, which must still rank first
     // where it is one.
     let active: Vec<usize> = (0..2).filter(|j| !pinned.contains(&(base + j))).collect();
-    let alternative = (c == Candidate::AccelerationLimit).then(|| {
+    let alternative = (search == Search::Limit { rate: true }).then(|| {
         let training_cost = |th: &[f64]| {
             simulate_all(&model, th, &data.recs, &cur.initial)
                 .map_or(f64::INFINITY, |y| frame.residuals(&y).norm_squared())
@@ -1138,7 +942,7 @@ fn fit_candidate(
                 let mut p = pinned.clone();
                 p.push(base + j);
                 let mut th = theta.clone();
-                th[base + j] = null_values(c, &cur.theta, 0.0)[j];
+                th[base + j] = c.effect().null(&cur.theta, 0.0)[j];
                 if let Ok(r) = run(&th, &p)
                     && best.as_ref().is_none_or(|b| cost(&r) < cost(&b.0))
                 {
@@ -1152,7 +956,7 @@ fn fit_candidate(
         Err(e) => return Err(e),
     };
     let mut time_resolution = 0.0;
-    if c == Candidate::PayloadChange {
+    if search == Search::ChangeTime {
         let step = (t_hi - t_lo) / (nominee.pattern.grid + 1) as f64;
         let t0 = full[base];
         let scan: Vec<(f64, f64)> = (-16..=16)
@@ -1198,7 +1002,10 @@ fn fit_candidate(
                     let a = free.iter().position(|&i| i == base + j)?;
                     let (x, se) = (full[base + j], fit.std_err[a]);
                     // A limit that hardly binds counts as weak whatever its interval.
-                    let idle = limit_binding(&data.recs, c, j, x).is_some_and(|f| f < 0.01);
+                    let idle = c
+                        .effect()
+                        .binding(&data.recs, j, x)
+                        .is_some_and(|f| f < 0.01);
                     Some((j, if se > 0.0 && !idle { x.abs() / se } else { 0.0 }))
                 })
                 .collect();
@@ -1211,12 +1018,12 @@ fn fit_candidate(
             // From the start again: the weak pair may have wandered along their valley.
             let mut th = theta.clone();
             pinned.push(base + j);
-            th[base + j] = null_values(c, &cur.theta, 0.0)[j];
+            th[base + j] = c.effect().null(&cur.theta, 0.0)[j];
             (fit, full, free) = run(&th, &pinned)?;
         }
     }
     let mut new = current_of(&model, cands, pinned, &fit, full, &free, data)?;
-    if c == Candidate::PayloadChange {
+    if search == Search::ChangeTime {
         // The change time's uncertainty is the width of its flat minimum.
         new.std_err[base] = time_resolution;
     }
@@ -1310,122 +1117,21 @@ fn remove_candidate(data: &Data, cur: &Current, k: usize) -> std::result::Result
     current_of(&model, cands, pinned, &fit, full, &free, data)
 }
 
-/// Significance and plausibility of a fitted candidate; `Err` says why not.
+/// Significance and plausibility of a fitted candidate ([`wheelid_core::Effect::plausible`]
+/// for each free parameter, then together); `Err` says why not.
 fn check_candidate(data: &Data, new: &Current, c: Candidate) -> std::result::Result<(), String> {
     let base = new.theta.len() - c.params().len();
-    let th = &new.theta;
-    let se = &new.std_err;
-    let names = c.params();
-    let free: Vec<usize> = (0..names.len())
-        .filter(|j| !new.pinned.contains(&(base + j)))
-        .collect();
-    let z = |j: usize, null: f64| {
-        let s = se[base + j];
-        if s > 0.0 {
-            (th[base + j] - null).abs() / s
-        } else {
-            0.0
-        }
+    let fit = FitData {
+        recordings: &data.recs,
+        theta: &new.theta,
+        covariance: &new.covariance,
+        base,
     };
-    let too_small = |j: usize, null: f64| -> Option<String> {
-        (z(j, null) < 3.0).then(|| {
-            format!(
-                "{} = {:.4} ± {:.4} is not significant (< 3 σ from {null})",
-                names[j].name,
-                th[base + j],
-                se[base + j]
-            )
-        })
-    };
-    let u_max = |ch: usize| {
-        abs_quantile(
-            data.recs.iter().flat_map(|r| {
-                if ch == 0 {
-                    r.v_ref.iter()
-                } else {
-                    r.w_ref.iter()
-                }
-                .copied()
-            }),
-            1.0,
-        )
-    };
-    let span = data
-        .recs
-        .iter()
-        .map(|r| r.t[r.len() - 1] - r.t[0])
-        .fold(0.0f64, f64::max);
-    for &j in &free {
-        let x = th[base + j];
-        let why = match c {
-            Candidate::InputDelay => too_small(j, 0.0)
-                .or_else(|| (x > 1.5).then(|| format!("a dead time of {x:.3} s is not plausible"))),
-            Candidate::VelocitySaturation | Candidate::AccelerationLimit => {
-                let s = se[base + j];
-                let rel = if x > 0.0 { s / x } else { f64::INFINITY };
-                let frac = limit_binding(&data.recs, c, j, th[base + j]).unwrap_or(1.0);
-                if s <= 0.0 || rel.is_nan() || rel >= 1.0 / 3.0 {
-                    Some(format!(
-                        "{} = {x:.4} ± {s:.4} is not significant",
-                        names[j].name
-                    ))
-                } else if frac < 0.01 {
-                    Some(format!(
-                        "{} = {x:.4} binds on only {:.2} % of the samples",
-                        names[j].name,
-                        100.0 * frac
-                    ))
-                } else {
-                    None
-                }
-            }
-            Candidate::CoulombFriction => too_small(j, 0.0).or_else(|| {
-                (x > 0.5 * u_max(j)).then(|| {
-                    format!(
-                        "{} = {x:.4} is more than half the largest command",
-                        names[j].name
-                    )
-                })
-            }),
-            Candidate::WheelAsymmetry => too_small(j, 1.0).or_else(|| {
-                (!(0.5..=2.0).contains(&x))
-                    .then(|| format!("a wheel gain ratio of {x:.3} is not plausible"))
-            }),
-            Candidate::PayloadChange => {
-                let i = [0, 0, 1, 2, 4][j];
-                ((1..=2).contains(&j) && !(0.2..=5.0).contains(&(x / th[i]))).then(|| {
-                    format!(
-                        "{} = {x:.4} is not plausible (θ{} = {:.4} before)",
-                        names[j].name,
-                        i + 1,
-                        th[i]
-                    )
-                })
-            }
-            Candidate::GainDrift => too_small(j, 0.0).or_else(|| {
-                (x.abs() * span > 0.5).then(|| {
-                    format!("a gain drift of {x:.2e}/s changes the gains by over 50 % in the run")
-                })
-            }),
-            Candidate::Slip => too_small(j, 0.0),
-        };
-        if let Some(w) = why {
-            return Err(w);
-        }
+    for j in (0..c.params().len()).filter(|j| !new.pinned.contains(&(base + j))) {
+        c.effect()
+            .plausible(j, new.theta[base + j], new.std_err[base + j], &fit)?;
     }
-    if c == Candidate::PayloadChange {
-        let changed = (1..=2).any(|j| {
-            let i = j - 1;
-            let var = new.covariance[(base + j, base + j)] + new.covariance[(i, i)]
-                - 2.0 * new.covariance[(base + j, i)];
-            let sd = var.max(0.0).sqrt();
-            sd > 0.0 && (th[base + j] - th[i]).abs() / sd >= 3.0
-        });
-        if !changed {
-            return Err("θ1 and θ2 after the change are within 3 σ of before".into());
-        }
-    }
-    Ok(())
+    c.effect().plausible_together(&fit)
 }
 
 /// Runs a diagnosis of `recordings` with the nominal `model` (its θ seeds every extended
@@ -1820,7 +1526,7 @@ pub fn diagnose(
         let mut std_err = BTreeMap::new();
         for (j, info) in c.params().iter().enumerate() {
             // The change time is held during the fit but found by its own scan.
-            let scanned = c == Candidate::PayloadChange && j == 0;
+            let scanned = c.effect().search() == Search::ChangeTime && j == 0;
             if scanned || !new.pinned.contains(&(base + j)) {
                 parameters.insert(info.name.to_owned(), new.theta[base + j]);
                 std_err.insert(info.name.to_owned(), new.std_err[base + j]);
@@ -1887,7 +1593,7 @@ pub fn diagnose(
                     *v = cur.theta[at + j];
                 }
                 if let Some(v) = f.std_err.get_mut(info.name)
-                    && !(*c == Candidate::PayloadChange && j == 0)
+                    && !(c.effect().search() == Search::ChangeTime && j == 0)
                 {
                     *v = cur.std_err[at + j];
                 }

@@ -1,0 +1,273 @@
+//! Effects: the physics that the six-θ model (Laut 2011 eq. 2.19) leaves out, as the mismatch
+//! diagnosis sees them. An effect is one type implementing [`Effect`]: its parameters (with
+//! units, null values and fit bounds), which channels it acts on, how it extends the dynamics
+//! ([`Effect::apply`] into [`Terms`]), how its fingerprint is probed ([`Probe`]), how its fit
+//! is started ([`Search`]) and which fitted values are physically plausible.
+//!
+//! The extended dynamics (`wheelid_models::Extended`) apply the terms in this order, with u
+//! the recorded command held between samples:
+//!
+//! ```text
+//! 1. u(t − delay)                                   Terms::delay        [s]
+//! 2. clip to ±sat                                   Terms::sat          [m/s, rad/s]
+//! 3. slew at most at accel                          Terms::accel        [m/s², rad/s²]
+//! 4. wheel setpoints v ± dω/2 × 2ρ/(1+ρ), 2/(1+ρ)   Terms::ratio        [-]
+//! 5. × (1 + drift (t − t0))                         Terms::drift        [1/s]
+//! θ1 v̇ = u_v + θ3 ω² − θ4 v − c_v tanh(v/ε_v) − θ4 k_v v |ω|
+//! θ2 ω̇ = u_ω − θ5 v ω − θ6 ω − c_ω tanh(ω/ε_ω) − θ6 k_ω |v| ω
+//!                                                   Terms::coulomb, Terms::slip
+//! θ1, θ2, θ3, θ5 replaced from a time on            Terms::payload
+//! ```
+//!
+//! An effect whose physics fits these stages is one file and one line in the registry
+//! (`wheelid_models::effects::EFFECTS`); an effect that needs a new stage adds it here and in
+//! the integrator.
+
+use crate::{ParamInfo, Recording, Result};
+
+/// The stages of the extended dynamics that effects fill in (module docs). The default is the
+/// six-θ model: no delay, no limits, no friction, no payload change.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Terms {
+    /// Dead time of the commands [s].
+    pub delay: f64,
+    /// Largest rate of change of the (v, ω) setpoints [m/s², rad/s²].
+    pub accel: Option<[f64; 2]>,
+    /// Largest |v|, |ω| setpoint [m/s, rad/s].
+    pub sat: Option<[f64; 2]>,
+    /// Dry friction in command units [m/s, rad/s].
+    pub coulomb: [f64; 2],
+    /// Right/left wheel gain ratio ρ.
+    pub ratio: Option<f64>,
+    /// Change time [s] and θ1, θ2, θ3, θ5 after it.
+    pub payload: Option<(f64, [f64; 4])>,
+    /// Relative change of the setpoint gain per second [1/s].
+    pub drift: f64,
+    /// Losses per unit v·|ω| [s/rad] and |v|·ω [s/m].
+    pub slip: [f64; 2],
+}
+
+/// The channels an effect acts on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EffectChannels {
+    /// Both v and ω, through all its parameters.
+    Both,
+    /// Only ω.
+    Omega,
+    /// Parameter 0 acts on v, 1 on ω; each channel is fitted only where its own pattern asks
+    /// for it (`positive`: only where the residual asks for a positive value) and kept only
+    /// where it is significant.
+    Each {
+        /// Whether the parameter can only be positive (a loss, a friction).
+        positive: bool,
+    },
+}
+
+/// How an effect's fit is started from its fingerprint.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Search {
+    /// A Gauss–Newton step from the null, shortened by a line search on the training cost.
+    Smooth,
+    /// A limit read off the data: its level scaled on a grid; `rate` (a setpoint rate limit)
+    /// also tries the lags shortened, which a nominal fit lengthens to imitate the limit.
+    Limit {
+        /// Whether the limit is on the rate of the setpoint.
+        rate: bool,
+    },
+    /// A dead time: a geometric grid from half a sample to 1.5 s first.
+    DeadTime,
+    /// Parameter 0 is a change time: held while the rest is fitted, then scanned on a fine
+    /// grid (its standard error is the width of the flat minimum).
+    ChangeTime,
+}
+
+/// How an effect's fingerprint (the score test's pattern) is probed at its null.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Probe {
+    /// Finite-difference columns of the outputs: (parameter, step).
+    Gradient(Vec<(usize, f64)>),
+    /// A limit at levels read off the data: (parameter, level) for the channels where it
+    /// binds, and what the data show.
+    Levels {
+        /// (parameter, level in its unit) per binding channel.
+        levels: Vec<(usize, f64)>,
+        /// What the data show, for the report.
+        evidence: String,
+    },
+    /// Parameter `time` is a change time probed at `n` evenly spaced interior times; at each,
+    /// finite-difference columns of the other parameters with steps relative to their value.
+    TimeGrid {
+        /// Index of the time parameter.
+        time: usize,
+        /// Interior times.
+        n: usize,
+        /// (parameter, relative step).
+        columns: Vec<(usize, f64)>,
+    },
+}
+
+/// What an effect may read off the data to probe its fingerprint.
+#[derive(Debug, Clone, Copy)]
+pub struct ProbeData<'a> {
+    /// The recordings (uniform).
+    pub recordings: &'a [Recording],
+    /// Measured accelerations (v̇, ω̇) per recording (smoothed derivative).
+    pub accel: &'a [[Vec<f64>; 2]],
+    /// θ1…θ6 of the model in hand.
+    pub theta: &'a [f64],
+    /// Sample period [s].
+    pub dt: f64,
+    /// Wheel track d [m], if known.
+    pub track: Option<f64>,
+}
+
+impl ProbeData<'_> {
+    /// Command `ch` (0: v_ref, 1: ω_ref) over every recording.
+    pub fn command(&self, ch: usize) -> impl Iterator<Item = f64> + '_ {
+        self.recordings.iter().flat_map(move |r| {
+            if ch == 0 {
+                r.v_ref.iter()
+            } else {
+                r.w_ref.iter()
+            }
+            .copied()
+        })
+    }
+    /// Measured channel `ch` (0: v, 1: ω) over every recording.
+    pub fn measured(&self, ch: usize) -> impl Iterator<Item = f64> + '_ {
+        self.recordings
+            .iter()
+            .flat_map(move |r| if ch == 0 { r.v.iter() } else { r.w.iter() }.copied())
+    }
+}
+
+/// What a fitted effect is checked against.
+#[derive(Debug, Clone, Copy)]
+pub struct FitData<'a> {
+    /// The recordings.
+    pub recordings: &'a [Recording],
+    /// The whole fitted θ (θ1…θ6, then every effect's parameters).
+    pub theta: &'a [f64],
+    /// Its covariance (held parameters: 0).
+    pub covariance: &'a nalgebra::DMatrix<f64>,
+    /// Where this effect's parameters start in `theta`.
+    pub base: usize,
+}
+
+impl FitData<'_> {
+    /// Largest |command| on channel `ch` (0: v_ref, 1: ω_ref).
+    pub fn command_max(&self, ch: usize) -> f64 {
+        self.recordings
+            .iter()
+            .flat_map(|r| {
+                if ch == 0 {
+                    r.v_ref.iter()
+                } else {
+                    r.w_ref.iter()
+                }
+            })
+            .fold(0.0f64, |a, x| a.max(x.abs()))
+    }
+    /// Longest recording [s].
+    pub fn span_s(&self) -> f64 {
+        self.recordings
+            .iter()
+            .map(|r| r.t[r.len() - 1] - r.t[0])
+            .fold(0.0f64, f64::max)
+    }
+    /// Standard error of θ[i].
+    pub fn std_err(&self, i: usize) -> f64 {
+        self.covariance[(i, i)].max(0.0).sqrt()
+    }
+}
+
+/// The q quantile of |x| (0 for no data).
+pub fn abs_quantile(x: impl Iterator<Item = f64>, q: f64) -> f64 {
+    let mut v: Vec<f64> = x.map(f64::abs).collect();
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(f64::total_cmp);
+    v[((v.len() - 1) as f64 * q).round() as usize]
+}
+
+/// z = |x − null| / σ, 0 when σ is not positive.
+pub fn z_score(x: f64, null: f64, se: f64) -> f64 {
+    if se > 0.0 { (x - null).abs() / se } else { 0.0 }
+}
+
+/// `Err` unless x is at least 3 standard errors from `null`.
+///
+/// # Errors
+/// The sentence for the report.
+pub fn significant(
+    info: &ParamInfo,
+    x: f64,
+    se: f64,
+    null: f64,
+) -> std::result::Result<(), String> {
+    if z_score(x, null, se) < 3.0 {
+        Err(format!(
+            "{} = {x:.4} ± {se:.4} is not significant (< 3 σ from {null})",
+            info.name
+        ))
+    } else {
+        Ok(())
+    }
+}
+
+/// A physics the six-θ model leaves out (module docs). Implementations are unit structs
+/// registered in `wheelid_models::effects::EFFECTS`.
+pub trait Effect: Send + Sync + std::fmt::Debug {
+    /// The name in reports and configs (`input_delay`, …).
+    fn name(&self) -> &'static str;
+    /// Its parameters, appended after θ in the extended model: name, unit, meaning.
+    fn params(&self) -> &'static [ParamInfo];
+    /// The channels it acts on.
+    fn channels(&self) -> EffectChannels {
+        EffectChannels::Both
+    }
+    /// Parameter values at which the effect is absent, given θ1…θ6 and the middle of the
+    /// recordings' time span [s].
+    fn null(&self, theta: &[f64], t_mid: f64) -> Vec<f64>;
+    /// Bounds of its parameters in a fit, given the span of allowed change times [s].
+    fn bounds(&self, t_range: (f64, f64)) -> Vec<(f64, f64)>;
+    /// How its fit starts.
+    fn search(&self) -> Search {
+        Search::Smooth
+    }
+    /// Its fingerprint's probe on these data, `None` if it cannot act on them (a limit that
+    /// never binds, a wheel asymmetry without a track).
+    fn probe(&self, data: &ProbeData<'_>) -> Option<Probe>;
+    /// One sentence: what the residual shows when the effect is there.
+    fn evidence(&self) -> &'static str;
+    /// For a limit at `level` on channel `ch`: the fraction of the samples where it binds;
+    /// `None` for effects that are not limits.
+    fn binding(&self, _recordings: &[Recording], _ch: usize, _level: f64) -> Option<f64> {
+        None
+    }
+    /// Whether fitted parameter `j` (value `x`, standard error `se`) is significant and
+    /// physically plausible.
+    ///
+    /// # Errors
+    /// The reason for the report.
+    fn plausible(
+        &self,
+        j: usize,
+        x: f64,
+        se: f64,
+        fit: &FitData<'_>,
+    ) -> std::result::Result<(), String>;
+    /// A check over all its parameters together (default: none).
+    ///
+    /// # Errors
+    /// The reason for the report.
+    fn plausible_together(&self, _fit: &FitData<'_>) -> std::result::Result<(), String> {
+        Ok(())
+    }
+    /// Fills its stage of the extended dynamics from its parameters `p`.
+    ///
+    /// # Errors
+    /// [`crate::Error::InvalidSetting`] for values the dynamics cannot use.
+    fn apply(&self, p: &[f64], terms: &mut Terms) -> Result<()>;
+}

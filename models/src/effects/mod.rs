@@ -1,0 +1,168 @@
+//! The effects the mismatch diagnosis searches, one file each, and their registry
+//! ([`EFFECTS`]). A new effect is a file here implementing [`wheelid_core::Effect`] and one
+//! line in [`EFFECTS`]; a library user can also hand their own to the diagnosis through
+//! [`Candidate::new`] (its physics must fit the stages of [`wheelid_core::Terms`]).
+
+mod acceleration_limit;
+mod coulomb_friction;
+mod gain_drift;
+mod input_delay;
+mod payload_change;
+mod slip;
+mod velocity_saturation;
+mod wheel_asymmetry;
+
+use serde::{Deserialize, Deserializer, Serialize, Serializer};
+use wheelid_core::{Effect, ParamInfo};
+
+pub use acceleration_limit::{AccelerationLimit, slew_binding};
+pub use coulomb_friction::CoulombFriction;
+pub use gain_drift::GainDrift;
+pub use input_delay::InputDelay;
+pub use payload_change::PayloadChange;
+pub use slip::Slip;
+pub use velocity_saturation::VelocitySaturation;
+pub use wheel_asymmetry::WheelAsymmetry;
+
+/// The registry: every built-in effect, in the order the diagnosis reports them.
+pub static EFFECTS: [&dyn Effect; 8] = [
+    &InputDelay,
+    &AccelerationLimit,
+    &VelocitySaturation,
+    &CoulombFriction,
+    &WheelAsymmetry,
+    &PayloadChange,
+    &GainDrift,
+    &Slip,
+];
+
+/// A value far beyond any command: a limit at this level never binds (a limit's null).
+pub const NEVER: f64 = 1e6;
+
+/// A limit's level is significant (its standard error below a third of it) and binds on at
+/// least 1 % of the samples (`binding`: the fraction where it does).
+///
+/// # Errors
+/// The reason for the report.
+pub fn limit_plausible(
+    info: &ParamInfo,
+    x: f64,
+    se: f64,
+    binding: f64,
+) -> std::result::Result<(), String> {
+    let rel = if x > 0.0 { se / x } else { f64::INFINITY };
+    if se <= 0.0 || rel.is_nan() || rel >= 1.0 / 3.0 {
+        return Err(format!(
+            "{} = {x:.4} ± {se:.4} is not significant",
+            info.name
+        ));
+    }
+    if binding < 0.01 {
+        return Err(format!(
+            "{} = {x:.4} binds on only {:.2} % of the samples",
+            info.name,
+            100.0 * binding
+        ));
+    }
+    Ok(())
+}
+
+/// One effect the diagnosis can search: a handle on an [`Effect`], compared, hashed and
+/// (de)serialised by name.
+#[derive(Clone, Copy)]
+pub struct Candidate(&'static dyn Effect);
+
+impl Candidate {
+    /// Dead time of the commands ([`InputDelay`]).
+    pub const INPUT_DELAY: Candidate = Candidate(&InputDelay);
+    /// Rate limit on the setpoint ([`AccelerationLimit`]).
+    pub const ACCELERATION_LIMIT: Candidate = Candidate(&AccelerationLimit);
+    /// Clip of the setpoint ([`VelocitySaturation`]).
+    pub const VELOCITY_SATURATION: Candidate = Candidate(&VelocitySaturation);
+    /// Dry friction ([`CoulombFriction`]).
+    pub const COULOMB_FRICTION: Candidate = Candidate(&CoulombFriction);
+    /// Left/right wheel gain mismatch ([`WheelAsymmetry`]).
+    pub const WHEEL_ASYMMETRY: Candidate = Candidate(&WheelAsymmetry);
+    /// θ1, θ2, θ3, θ5 change at a time ([`PayloadChange`]).
+    pub const PAYLOAD_CHANGE: Candidate = Candidate(&PayloadChange);
+    /// Gains change slowly over the run ([`GainDrift`]).
+    pub const GAIN_DRIFT: Candidate = Candidate(&GainDrift);
+    /// Losses growing with v·|ω| ([`Slip`]).
+    pub const SLIP: Candidate = Candidate(&Slip);
+
+    /// A candidate for any effect (a built-in one of [`EFFECTS`] or the caller's own).
+    pub fn new(effect: &'static dyn Effect) -> Self {
+        Self(effect)
+    }
+
+    /// Every registered effect, in [`EFFECTS`] order.
+    pub fn all() -> Vec<Candidate> {
+        EFFECTS.iter().map(|&e| Candidate(e)).collect()
+    }
+
+    /// Every registered effect's name.
+    pub fn names() -> Vec<&'static str> {
+        EFFECTS.iter().map(|e| e.name()).collect()
+    }
+
+    /// The registered effect called `name`.
+    pub fn by_name(name: &str) -> Option<Self> {
+        EFFECTS
+            .iter()
+            .find(|e| e.name() == name)
+            .map(|&e| Candidate(e))
+    }
+
+    /// The effect.
+    pub fn effect(self) -> &'static dyn Effect {
+        self.0
+    }
+
+    /// Its name (`input_delay`, …).
+    pub fn name(self) -> &'static str {
+        self.0.name()
+    }
+
+    /// Its parameters (appended after θ in the extended model).
+    pub fn params(self) -> &'static [ParamInfo] {
+        self.0.params()
+    }
+}
+
+impl std::fmt::Debug for Candidate {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl PartialEq for Candidate {
+    fn eq(&self, other: &Self) -> bool {
+        self.name() == other.name()
+    }
+}
+
+impl Eq for Candidate {}
+
+impl std::hash::Hash for Candidate {
+    fn hash<H: std::hash::Hasher>(&self, state: &mut H) {
+        self.name().hash(state);
+    }
+}
+
+impl Serialize for Candidate {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(self.name())
+    }
+}
+
+impl<'de> Deserialize<'de> for Candidate {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let name = String::deserialize(d)?;
+        Candidate::by_name(&name).ok_or_else(|| {
+            serde::de::Error::custom(format!(
+                "unknown effect `{name}` (known: {})",
+                Candidate::names().join(", ")
+            ))
+        })
+    }
+}
