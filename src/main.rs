@@ -572,7 +572,6 @@ fn run_diagnose(a: DiagnoseArgs) -> Result<()> {
     settings.max_effects = a.max_effects.unwrap_or(settings.max_effects);
     settings.alpha = a.alpha.unwrap_or(settings.alpha);
     settings.track_m = a.track.or(settings.track_m);
-    settings.progress = !a.json;
     let files: Vec<PathBuf> = if a.files.is_empty() {
         cfg.files.iter().map(|f| base.join(f)).collect()
     } else {
@@ -590,7 +589,9 @@ fn run_diagnose(a: DiagnoseArgs) -> Result<()> {
             .map(Recording::read_csv)
             .collect::<Result<Vec<_>, _>>()?
     };
-    let d = wheelid::diagnose::diagnose(&recordings, model.as_ref(), &settings)?;
+    let bar = Bar::new(!a.json);
+    let d = wheelid::diagnose::diagnose_observed(&recordings, model.as_ref(), &settings, &bar)?;
+    bar.0.finish_and_clear();
     if a.json {
         println!("{}", serde_json::to_string_pretty(&d)?);
     } else {
@@ -601,6 +602,36 @@ fn run_diagnose(a: DiagnoseArgs) -> Result<()> {
         list_plots(&wheelid::plot::write_diagnosis_plots(&d, dir)?, a.json);
     }
     Ok(())
+}
+
+/// The diagnosis's progress as a bar on standard error (hidden when it is not a terminal or
+/// the output is JSON).
+struct Bar(indicatif::ProgressBar);
+
+impl Bar {
+    fn new(show: bool) -> Self {
+        use std::io::IsTerminal;
+        let bar = if show && std::io::stderr().is_terminal() {
+            indicatif::ProgressBar::new(4)
+        } else {
+            indicatif::ProgressBar::hidden()
+        };
+        bar.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{spinner} diagnose [{bar:30}] {pos}/{len} {msg}",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        Self(bar)
+    }
+}
+
+impl wheelid::diagnose::Observer for Bar {
+    fn progress(&self, message: &str, done: u64, total: u64) {
+        self.0.set_length(total);
+        self.0.set_position(done);
+        self.0.set_message(message.to_owned());
+    }
 }
 
 /// The built-in diagnosis example: 5 minutes of the simulated Pioneer 3-DX under a random

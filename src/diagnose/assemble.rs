@@ -1,0 +1,122 @@
+//! Step 8 of the diagnosis: the report — every finding's parameters as the final model has
+//! them, what stays unexplained and where, the before/after series.
+
+use super::*;
+
+/// A channel whose validation fit stays below this [%] is a mismatch whatever the tests say:
+/// a model that explains less than this share of a channel is not kept silently.
+pub const LOW_FIT_PERCENT: f64 = 70.0;
+
+/// Every finding's parameters as the final model has them (the later fits refit them all).
+fn final_parameters(findings: &mut [Finding], cur: &Current) {
+    let mut at = 6;
+    for c in &cur.candidates {
+        if let Some(f) = findings.iter_mut().find(|f| f.effect == c.name()) {
+            for (j, info) in c.params().iter().enumerate() {
+                if let Some(v) = f.parameters.get_mut(info.name) {
+                    *v = cur.theta[at + j];
+                }
+                if let Some(v) = f.std_err.get_mut(info.name)
+                    && !(c.effect().search() == Search::ChangeTime && j == 0)
+                {
+                    *v = cur.std_err[at + j];
+                }
+            }
+        }
+        at += c.params().len();
+    }
+}
+
+/// What the final model leaves unexplained: the channels whose residual still depends on the
+/// commands (Holm over the final location's tests, when the first round found a mismatch),
+/// and the channels whose validation fit stays below [`LOW_FIT_PERCENT`], with where the
+/// misfit lives.
+fn unexplained(
+    mismatch: bool,
+    location: &Location,
+    final_stage: &Stage,
+    alpha: f64,
+) -> Option<Unexplained> {
+    let left = holm(&location.p_values(), alpha);
+    let fits = [
+        final_stage.channels.v.fit_percent,
+        final_stage.channels.w.fit_percent,
+    ];
+    let channels: Vec<usize> = (0..2)
+        .filter(|&c| (mismatch && (left[2 * c] || left[2 * c + 1])) || fits[c] < LOW_FIT_PERCENT)
+        .collect();
+    if channels.is_empty() {
+        return None;
+    }
+    Some(Unexplained {
+        channels: channels.iter().map(|&c| ["v", "w"][c].to_owned()).collect(),
+        location: channels
+            .iter()
+            .map(|&c| {
+                let low = if fits[c] < LOW_FIT_PERCENT {
+                    format!(
+                        "validation fit {:.1} % (< {LOW_FIT_PERCENT:.0} %); ",
+                        fits[c]
+                    )
+                } else {
+                    String::new()
+                };
+                format!("{}: {low}{}", ["v", "ω"][c], location.summary(c))
+            })
+            .collect(),
+    })
+}
+
+/// The [`Diagnosis`] from the search's outcome.
+pub(super) fn assemble(
+    data: &Data,
+    settings: &DiagnoseSettings,
+    nominal: Stage,
+    location: Location,
+    mut out: search::Outcome,
+    nominal_sim: &Outputs,
+    seconds: f64,
+) -> Diagnosis {
+    final_parameters(&mut out.findings, &out.cur);
+    let final_location = if out.findings.is_empty() {
+        location.clone()
+    } else {
+        let max_lag = data.max_lag(settings);
+        locate::locate(&data.recs, &out.cur.sim, &data.valid, data.dt, max_lag)
+    };
+    let final_stage = data.stage(&out.cur);
+    let unexplained = unexplained(out.mismatch, &final_location, &final_stage, settings.alpha);
+    let series = data
+        .recs
+        .iter()
+        .enumerate()
+        .map(|(r, rec)| DiagnosisSeries {
+            source: rec.source.clone(),
+            t: rec.t.clone(),
+            validation: data.valid[r].clone(),
+            measured: [rec.v.clone(), rec.w.clone()],
+            nominal: nominal_sim[r].clone(),
+            extended: out.cur.sim[r].clone(),
+        })
+        .collect();
+    let seconds_of = |m: &[Vec<bool>]| m.iter().flatten().filter(|&&b| b).count() as f64 * data.dt;
+    Diagnosis {
+        nominal,
+        split: Split {
+            blocks: settings.blocks,
+            training_s: seconds_of(&data.train),
+            validation_s: seconds_of(&data.valid),
+        },
+        tests: out.tests,
+        mismatch: out.mismatch || unexplained.is_some(),
+        location,
+        fingerprints: out.rounds,
+        findings: out.findings,
+        rejected: out.rejected,
+        unexplained,
+        final_stage,
+        final_location,
+        seconds,
+        series,
+    }
+}

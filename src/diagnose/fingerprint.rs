@@ -1,0 +1,198 @@
+//! Step 4 of the diagnosis: each candidate's fingerprint — the pattern its effect would leave
+//! in the residual ([`wheelid_core::Probe`]) and its score test at the model in hand.
+
+use super::*;
+
+/// A candidate's pattern columns and the guesses they come with.
+pub(super) struct Pattern {
+    pub(super) candidate: Candidate,
+    /// Columns per candidate parameter (None: not probed).
+    pub(super) s: DMatrix<f64>,
+    /// Which candidate parameter each column belongs to.
+    pub(super) param_of_col: Vec<usize>,
+    /// Parameter values: the probe levels or null + β̂ after the test.
+    pub(super) guess: Vec<f64>,
+    /// Parameters held at their null (inactive channels).
+    pub(super) inactive: Vec<usize>,
+    /// Description for the report.
+    pub(super) evidence: String,
+    /// Bonferroni factor (grid of payload times).
+    pub(super) grid: usize,
+}
+
+/// Builds the fingerprints of `c` at the current model from its [`Probe`]; `None` if the
+/// candidate cannot act on these data (no probe level binds, no track for the asymmetry).
+pub(super) fn patterns(c: Candidate, data: &Data, cur: &Current) -> Option<Vec<Pattern>> {
+    let frame = data.frame();
+    let mut cands = cur.candidates.clone();
+    cands.push(c);
+    let model = data.model(&cands);
+    let th6 = &cur.theta[..6];
+    let (t_lo, t_hi) = data.span();
+    let null = c.effect().null(th6, 0.5 * (t_lo + t_hi));
+    let with = |vals: &[f64]| {
+        let mut th = cur.theta.clone();
+        th.extend_from_slice(vals);
+        simulate_all(&model, &th, &data.recs, &cur.initial)
+    };
+    let fd = |vals: &[f64], j: usize, h: f64| -> Option<nalgebra::DVector<f64>> {
+        let mut v = vals.to_vec();
+        v[j] += h;
+        let y = with(&v)?;
+        Some(frame.flatten(&score::difference(&y, &cur.sim, h)))
+    };
+    let single =
+        |cols: Vec<nalgebra::DVector<f64>>, params: Vec<usize>, evidence: String| Pattern {
+            candidate: c,
+            s: DMatrix::from_columns(&cols),
+            param_of_col: params,
+            guess: null.clone(),
+            inactive: Vec::new(),
+            evidence,
+            grid: 1,
+        };
+    let probe_data = ProbeData {
+        recordings: &data.recs,
+        accel: &data.accel,
+        theta: th6,
+        dt: data.dt,
+        track: data.track,
+    };
+    match c.effect().probe(&probe_data)? {
+        Probe::Gradient(steps) => {
+            let cols = steps
+                .iter()
+                .map(|&(j, h)| fd(&null, j, h))
+                .collect::<Option<Vec<_>>>()?;
+            let params = steps.iter().map(|&(j, _)| j).collect();
+            Some(vec![single(cols, params, c.effect().evidence().into())])
+        }
+        // The level read off a nominal fit that has absorbed part of the limit sits above the
+        // true one: probed at a few fractions of it, the best taken (Bonferroni).
+        Probe::Levels { levels, evidence } => {
+            let params: Vec<usize> = levels.iter().map(|&(j, _)| j).collect();
+            let mut out = Vec::new();
+            for f in PROBE_FRACTIONS {
+                let mut v = null.clone();
+                for &(j, level) in &levels {
+                    v[j] = f * level;
+                }
+                let cols = params
+                    .iter()
+                    .map(|&j| {
+                        let mut one = null.clone();
+                        one[j] = v[j];
+                        with(&one).map(|y| frame.flatten(&score::difference(&y, &cur.sim, 1.0)))
+                    })
+                    .collect::<Option<Vec<_>>>()?;
+                let mut p = single(cols, params.clone(), evidence.clone());
+                p.guess = v;
+                p.grid = PROBE_FRACTIONS.len();
+                out.push(p);
+            }
+            Some(out)
+        }
+        // A grid of change times over the middle of the run, one thread per time.
+        Probe::TimeGrid { time, n, columns } => {
+            let pattern_at = |g: usize| {
+                let ts = t_lo + (t_hi - t_lo) * g as f64 / (n + 1) as f64;
+                let mut vals = null.clone();
+                vals[time] = ts;
+                let cols = columns
+                    .iter()
+                    .map(|&(j, rel)| fd(&vals, j, rel * vals[j].abs().max(1e-3)))
+                    .collect::<Option<Vec<_>>>()?;
+                let params = columns.iter().map(|&(j, _)| j).collect();
+                let mut p = single(
+                    cols,
+                    params,
+                    format!("the dynamics change around t = {ts:.1} s"),
+                );
+                p.guess = vals;
+                p.grid = n;
+                Some(p)
+            };
+            std::thread::scope(|scope| {
+                let handles: Vec<_> = (1..=n)
+                    .map(|g| {
+                        let pattern_at = &pattern_at;
+                        scope.spawn(move || pattern_at(g))
+                    })
+                    .collect();
+                handles
+                    .into_iter()
+                    .map(|h| h.join().ok().flatten())
+                    .collect::<Option<Vec<_>>>()
+            })
+        }
+    }
+}
+
+/// One candidate's fingerprint at the current model: the best pattern (over the payload
+/// grid) with its score.
+pub(super) struct Nominee {
+    pub(super) pattern: Pattern,
+    pub(super) score: score::Score,
+    pub(super) p_value: f64,
+}
+
+pub(super) fn fingerprint(
+    c: Candidate,
+    data: &Data,
+    cur: &Current,
+    q: &DMatrix<f64>,
+    e: &nalgebra::DVector<f64>,
+) -> Option<Nominee> {
+    let frame = data.frame();
+    let lags = data.hac_lags();
+    let mut best: Option<Nominee> = None;
+    for mut pattern in patterns(c, data, cur)? {
+        let Some(s) = score::score(&frame, q, &pattern.s, e, lags) else {
+            continue;
+        };
+        let p_value = (s.p_value * pattern.grid as f64).min(1.0);
+        // Channels: columns whose own z is large; the others stay at their null.
+        if let EffectChannels::Each { positive } = c.effect().channels() {
+            // Every channel the pattern reaches is fitted (a friction or a loss only where the
+            // residual asks for a positive one); insignificant ones are dropped after the fit.
+            let active: Vec<usize> = pattern
+                .param_of_col
+                .iter()
+                .zip(&s.beta)
+                .filter(|(_, b)| !positive || **b > 0.0)
+                .map(|(&j, _)| j)
+                .collect();
+            pattern.inactive = (0..2).filter(|j| !active.contains(j)).collect();
+        }
+        // First guess: the probe level, or one Gauss–Newton step from the null.
+        if !matches!(c.effect().search(), Search::Limit { .. }) {
+            for (col, &j) in pattern.param_of_col.iter().enumerate() {
+                pattern.guess[j] += s.beta[col];
+            }
+        }
+        let better = best
+            .as_ref()
+            .is_none_or(|b| p_value < b.p_value || (p_value == b.p_value && s.stat > b.score.stat));
+        if better {
+            best = Some(Nominee {
+                pattern,
+                score: s,
+                p_value,
+            });
+        }
+    }
+    best
+}
+
+/// The channels a candidate acts on ([`EffectChannels`]): for a per-channel one, those whose
+/// parameter is `active`.
+pub(super) fn channels_of(c: Candidate, active: impl Fn(usize) -> bool) -> Vec<String> {
+    match c.effect().channels() {
+        EffectChannels::Each { .. } => (0..2)
+            .filter(|&j| active(j))
+            .map(|j| ["v", "w"][j].to_owned())
+            .collect(),
+        EffectChannels::Omega => vec!["w".into()],
+        EffectChannels::Both => vec!["v".into(), "w".into()],
+    }
+}

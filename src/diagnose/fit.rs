@@ -1,0 +1,321 @@
+//! Step 6 of the diagnosis: fit a candidate on the training blocks (output error, some
+//! parameters held), and refit without one (the backward step).
+
+use super::*;
+
+/// The extended model with some parameters held: the fitter sees only the free ones.
+pub(super) struct Pinned<'a> {
+    pub(super) inner: &'a Extended,
+    pub(super) free: Vec<usize>,
+    pub(super) full: Vec<f64>,
+    pub(super) params: Vec<ParamInfo>,
+}
+
+impl<'a> Pinned<'a> {
+    pub(super) fn new(inner: &'a Extended, full: Vec<f64>, pinned: &[usize]) -> Self {
+        let free: Vec<usize> = (0..full.len()).filter(|i| !pinned.contains(i)).collect();
+        let params = free.iter().map(|&i| inner.params()[i]).collect();
+        Self {
+            inner,
+            free,
+            full,
+            params,
+        }
+    }
+    pub(super) fn expand(&self, theta: &[f64]) -> Vec<f64> {
+        let mut f = self.full.clone();
+        for (&i, &x) in self.free.iter().zip(theta) {
+            f[i] = x;
+        }
+        f
+    }
+    pub(super) fn free_values(&self) -> Vec<f64> {
+        self.free.iter().map(|&i| self.full[i]).collect()
+    }
+}
+
+impl DynamicModel for Pinned<'_> {
+    fn name(&self) -> &str {
+        self.inner.name()
+    }
+    fn params(&self) -> &[ParamInfo] {
+        &self.params
+    }
+    fn channels(&self) -> &[ChannelInfo] {
+        self.inner.channels()
+    }
+    fn simulate(&self, theta: &[f64], rec: &Recording, initial: &[f64]) -> CoreResult<Simulation> {
+        self.inner.simulate(&self.expand(theta), rec, initial)
+    }
+    fn simulate_with_sensitivities(
+        &self,
+        theta: &[f64],
+        rec: &Recording,
+        initial: &[f64],
+    ) -> CoreResult<Option<(Simulation, Sensitivities)>> {
+        self.inner
+            .sensitivities_of(&self.expand(theta), rec, initial, &self.free)
+            .map(Some)
+    }
+}
+
+/// Bounds of the whole θ of the model with `candidates`: θ1…θ6 free, then each candidate's.
+pub(super) fn model_bounds(candidates: &[Candidate], t_range: (f64, f64)) -> Vec<(f64, f64)> {
+    let mut b = vec![(f64::NEG_INFINITY, f64::INFINITY); 6];
+    for c in candidates {
+        b.extend(c.effect().bounds(t_range));
+    }
+    b
+}
+
+/// Fits the current model plus `nominee` on the training blocks from `start`; returns the new
+/// state and the fit.
+pub(super) fn fit_candidate(
+    data: &Data,
+    cur: &Current,
+    nominee: &Nominee,
+    start: Start,
+) -> std::result::Result<(Current, OutputErrorFit), String> {
+    let c = nominee.pattern.candidate;
+    let mut cands = cur.candidates.clone();
+    cands.push(c);
+    let model = data.model(&cands);
+    let base = cur.theta.len();
+    let Start {
+        mut theta,
+        bounds,
+        mut pinned,
+        ..
+    } = start;
+    let frame = data.frame();
+    let (t_lo, t_hi) = data.span();
+    let margin = 0.05 * (t_hi - t_lo);
+    let run = |theta: &[f64], pinned: &[usize]| fit_pinned(data, &model, theta, pinned, &bounds);
+    let search = c.effect().search();
+    let two = matches!(c.effect().channels(), EffectChannels::Each { .. });
+    let both_free = (0..2).all(|j| !pinned.contains(&(base + j)));
+    // Compared at the common (nominal) weights: each fit's own cost is weighted by its own
+    // noise levels.
+    let cost = |r: &PinnedFit| {
+        (0..2)
+            .map(|c| (r.0.noise_std[c] * data.weight[c]).powi(2))
+            .sum::<f64>()
+    };
+    let mut first = run(&theta, &pinned);
+    // A rate limit the nominal model lacks is traded for a slower lag (θ1, θ2 too large, a
+    // limit then hardly binds): the fit also runs from the active channels' θ1, θ2 shortened
+    // (a coarse grid with the level, then the level's grid), the better fit kept. Not in the
+    // screen: a fast lag with a ramp also imitates a dead time, which must still rank first
+    // where it is one.
+    let active: Vec<usize> = (0..2).filter(|j| !pinned.contains(&(base + j))).collect();
+    let alternative = (search == Search::Limit { rate: true }).then(|| {
+        let training_cost = |th: &[f64]| {
+            simulate_all(&model, th, &data.recs, &cur.initial)
+                .map_or(f64::INFINITY, |y| frame.residuals(&y).norm_squared())
+        };
+        let mut best = (f64::INFINITY, 1.0, 1.0);
+        for lag in [0.3, 0.1, 0.03] {
+            for level in [0.5, 1.0, 2.0] {
+                let cost = training_cost(&scaled(&theta, base, &active, level, lag));
+                if cost < best.0 {
+                    best = (cost, level, lag);
+                }
+            }
+        }
+        let from = scaled(&theta, base, &active, best.1, best.2);
+        level_grid(&from, base, &active, &training_cost)
+    });
+    if let Some(alt) = alternative
+        && let Ok(r) = run(&alt, &pinned)
+        && first.as_ref().map_or(true, |f| cost(&r) < cost(f))
+    {
+        first = Ok(r);
+        theta = alt;
+    }
+    let (mut fit, mut full, mut free) = match first {
+        Ok(r) => r,
+        // Both channels cannot be told apart (one never acts): each alone, the better kept.
+        Err(first) if two && both_free => {
+            let mut best: Option<(PinnedFit, Vec<usize>)> = None;
+            for j in 0..2 {
+                let mut p = pinned.clone();
+                p.push(base + j);
+                let mut th = theta.clone();
+                th[base + j] = c.effect().null(&cur.theta, 0.0)[j];
+                if let Ok(r) = run(&th, &p)
+                    && best.as_ref().is_none_or(|b| cost(&r) < cost(&b.0))
+                {
+                    best = Some((r, p));
+                }
+            }
+            let (r, p) = best.ok_or(first)?;
+            pinned = p;
+            r
+        }
+        Err(e) => return Err(e),
+    };
+    let mut time_resolution = 0.0;
+    if search == Search::ChangeTime {
+        let step = (t_hi - t_lo) / (nominee.pattern.grid + 1) as f64;
+        let t0 = full[base];
+        let scan: Vec<(f64, f64)> = (-16..=16)
+            .map(|i| {
+                let mut th = full.clone();
+                th[base] = (t0 + step * i as f64 / 16.0).clamp(t_lo + margin, t_hi - margin);
+                let cost = simulate_all(&model, &th, &data.recs, &fit.initial)
+                    .map_or(f64::INFINITY, |y| frame.residuals(&y).norm_squared());
+                (th[base], cost)
+            })
+            .collect();
+        // The contiguous run of near-minimal points around the least one.
+        let (arg, least) =
+            scan.iter().enumerate().fold(
+                (0, f64::INFINITY),
+                |a, (i, x)| if x.1 < a.1 { (i, x.1) } else { a },
+            );
+        let near = |i: usize| scan[i].1 <= least * (1.0 + 1e-6) + 1e-12;
+        let (mut a, mut b) = (arg, arg);
+        while a > 0 && near(a - 1) {
+            a -= 1;
+        }
+        while b + 1 < scan.len() && near(b + 1) {
+            b += 1;
+        }
+        let (lo, hi) = (scan[a].0, scan[b].0);
+        time_resolution = 0.5 * (hi - lo) + step / 32.0;
+        let t_best = 0.5 * (lo + hi);
+        if (t_best - t0).abs() > 1e-9 {
+            let mut th = full.clone();
+            th[base] = t_best;
+            (fit, full, free) = run(&th, &pinned)?;
+        }
+    }
+    // A two-channel candidate keeps only the channels where it is significant.
+    if two {
+        // The weakest channel is dropped while more than one is fitted and one is weak (a
+        // parameter that another absorbs, e.g. a turning loss |v|·ω that θ5 v·ω stands for when
+        // v keeps its sign, also blurs its partner).
+        loop {
+            let z: Vec<(usize, f64)> = (0..2)
+                .filter_map(|j| {
+                    let a = free.iter().position(|&i| i == base + j)?;
+                    let (x, se) = (full[base + j], fit.std_err[a]);
+                    // A limit that hardly binds counts as weak whatever its interval.
+                    let idle = c
+                        .effect()
+                        .binding(&data.recs, j, x)
+                        .is_some_and(|f| f < 0.01);
+                    Some((j, if se > 0.0 && !idle { x.abs() / se } else { 0.0 }))
+                })
+                .collect();
+            let Some(&(j, zmin)) = z.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
+                break;
+            };
+            if z.len() < 2 || zmin >= 3.0 {
+                break;
+            }
+            // From the start again: the weak pair may have wandered along their valley.
+            let mut th = theta.clone();
+            pinned.push(base + j);
+            th[base + j] = c.effect().null(&cur.theta, 0.0)[j];
+            (fit, full, free) = run(&th, &pinned)?;
+        }
+    }
+    let mut new = current_of(&model, cands, pinned, &fit, full, &free, data)?;
+    if search == Search::ChangeTime {
+        // The change time's uncertainty is the width of its flat minimum.
+        new.std_err[base] = time_resolution;
+    }
+    Ok((new, fit))
+}
+
+/// An output-error fit of some parameters: the fit, the full θ, the free indices.
+pub(super) type PinnedFit = (OutputErrorFit, Vec<f64>, Vec<usize>);
+
+/// Fits `model` on the training blocks from `theta` with the `pinned` parameters held
+/// (`bounds` for the full θ).
+pub(super) fn fit_pinned(
+    data: &Data,
+    model: &Extended,
+    theta: &[f64],
+    pinned: &[usize],
+    bounds: &[(f64, f64)],
+) -> std::result::Result<PinnedFit, String> {
+    let restricted = Pinned::new(model, theta.to_vec(), pinned);
+    let oe = OutputError {
+        bounds: Some(restricted.free.iter().map(|&i| bounds[i]).collect()),
+        mask: Some(data.train.clone()),
+        patience: 10,
+        tolerance: 1e-5,
+        forward_differences: true,
+        ..OutputError::default()
+    };
+    let fit = oe
+        .fit(&restricted, &data.recs, &restricted.free_values())
+        .map_err(|e| format!("the fit failed: {e}"))?;
+    let full = restricted.expand(&fit.theta);
+    Ok((fit, full, restricted.free))
+}
+
+/// The search state after a fit: standard errors and covariance spread back onto the full θ
+/// (held parameters 0), and the fitted model's simulation.
+pub(super) fn current_of(
+    model: &Extended,
+    candidates: Vec<Candidate>,
+    pinned: Vec<usize>,
+    fit: &OutputErrorFit,
+    full: Vec<f64>,
+    free: &[usize],
+    data: &Data,
+) -> std::result::Result<Current, String> {
+    let p = full.len();
+    let mut std_err = vec![0.0; p];
+    let mut covariance = DMatrix::zeros(p, p);
+    for (a, &i) in free.iter().enumerate() {
+        std_err[i] = fit.std_err[a];
+        for (b, &j) in free.iter().enumerate() {
+            covariance[(i, j)] = fit.covariance[(a, b)];
+        }
+    }
+    let sim = simulate_all(model, &full, &data.recs, &fit.initial)
+        .ok_or("the fitted model does not simulate")?;
+    Ok(Current {
+        candidates,
+        pinned,
+        theta: full,
+        std_err,
+        covariance,
+        initial: fit.initial.clone(),
+        sim,
+        jacobian: Some(data.frame().weigh(&fit.jacobian)),
+    })
+}
+
+/// The current model without its `k`-th candidate, refitted on the training blocks.
+pub(super) fn remove_candidate(
+    data: &Data,
+    cur: &Current,
+    k: usize,
+) -> std::result::Result<Current, String> {
+    let offset = 6 + cur.candidates[..k]
+        .iter()
+        .map(|c| c.params().len())
+        .sum::<usize>();
+    let len = cur.candidates[k].params().len();
+    let mut cands = cur.candidates.clone();
+    cands.remove(k);
+    let mut theta = cur.theta.clone();
+    theta.drain(offset..offset + len);
+    let pinned: Vec<usize> = cur
+        .pinned
+        .iter()
+        .filter(|&&i| i < offset || i >= offset + len)
+        .map(|&i| if i >= offset { i - len } else { i })
+        .collect();
+    let (t_lo, t_hi) = data.span();
+    let margin = 0.05 * (t_hi - t_lo);
+    let bounds = model_bounds(&cands, (t_lo + margin, t_hi - margin));
+    let model = data.model(&cands);
+    let (fit, full, free) = fit_pinned(data, &model, &theta, &pinned, &bounds)?;
+    current_of(&model, cands, pinned, &fit, full, &free, data)
+}

@@ -1,0 +1,268 @@
+//! Step 1 of the diagnosis: prepare the data once — uniform recordings, the training and
+//! validation blocks, the wheel track, the measured accelerations, the channel weights.
+
+use super::*;
+
+/// Everything the search needs about the data.
+pub(super) struct Data {
+    pub(super) recs: Vec<Recording>,
+    /// Training flags.
+    pub(super) train: Vec<Vec<bool>>,
+    /// Validation flags.
+    pub(super) valid: Vec<Vec<bool>>,
+    pub(super) dt: f64,
+    /// Blocks per recording.
+    pub(super) blocks: usize,
+    pub(super) track: Option<f64>,
+    /// 1/σ_c of the nominal fit.
+    pub(super) weight: [f64; 2],
+    /// Measured accelerations (smoothed derivative) per recording.
+    pub(super) accel: Outputs,
+}
+
+impl Data {
+    pub(super) fn model(&self, candidates: &[Candidate]) -> Extended {
+        // A missing track only matters to wheel_asymmetry, which is skipped then.
+        Extended::new(candidates, self.track.unwrap_or(1.0)).expect("candidates are distinct")
+    }
+    pub(super) fn frame(&self) -> Frame<'_> {
+        Frame {
+            recs: &self.recs,
+            mask: &self.train,
+            weight: self.weight,
+        }
+    }
+    /// Validation fits and cost of simulated outputs.
+    pub(super) fn validate(&self, sim: &Outputs) -> (Channels, f64) {
+        let mut y = [Vec::new(), Vec::new()];
+        let mut s = [Vec::new(), Vec::new()];
+        for ((rec, m), out) in self.recs.iter().zip(&self.valid).zip(sim) {
+            for k in (0..rec.len()).filter(|&k| m[k]) {
+                y[0].push(rec.v[k]);
+                y[1].push(rec.w[k]);
+                s[0].push(out[0][k]);
+                s[1].push(out[1][k]);
+            }
+        }
+        let fit = |c: usize| ChannelFit {
+            fit_percent: metrics::fit_percent(&y[c], &s[c]),
+            rms: (y[c]
+                .iter()
+                .zip(&s[c])
+                .map(|(a, b)| (a - b).powi(2))
+                .sum::<f64>()
+                / y[c].len().max(1) as f64)
+                .sqrt(),
+        };
+        let cost = (0..2)
+            .map(|c| {
+                y[c].iter()
+                    .zip(&s[c])
+                    .map(|(a, b)| ((a - b) * self.weight[c]).powi(2))
+                    .sum::<f64>()
+            })
+            .sum();
+        (
+            Channels {
+                v: fit(0),
+                w: fit(1),
+            },
+            cost,
+        )
+    }
+    /// Earliest and latest time over the recordings [s].
+    pub(super) fn span(&self) -> (f64, f64) {
+        let lo = self
+            .recs
+            .iter()
+            .map(|r| r.t[0])
+            .fold(f64::INFINITY, f64::min);
+        let hi = self
+            .recs
+            .iter()
+            .map(|r| r.t[r.len() - 1])
+            .fold(f64::NEG_INFINITY, f64::max);
+        (lo, hi)
+    }
+    /// Shortest block [samples].
+    pub(super) fn block(&self) -> usize {
+        self.recs
+            .iter()
+            .map(|r| r.len() / self.blocks)
+            .min()
+            .unwrap_or(1)
+            .max(1)
+    }
+    /// Lags of the correlation tests: `max_lag_s`, at most half a block.
+    pub(super) fn max_lag(&self, settings: &DiagnoseSettings) -> usize {
+        ((settings.max_lag_s / self.dt).round() as usize).clamp(1, (self.block() / 2).max(1))
+    }
+    /// Lag window of the fingerprints' long-run variance: the Newey–West rule, but at least a
+    /// second (free-run residuals stay correlated over the robot's time constants and
+    /// longer), at most a quarter block.
+    pub(super) fn hac_lags(&self) -> usize {
+        let n = self.recs.iter().map(Recording::len).max().unwrap_or(0);
+        let rule = (4.0 * (n as f64 / 100.0).powf(2.0 / 9.0)).floor() as usize;
+        rule.max((1.0 / self.dt).round() as usize)
+            .min((self.block() / 4).max(1))
+    }
+}
+
+/// The wheel track from the metadata: `track`, a `kinematics` line with `track X`, or the
+/// built-in profile named by `robot`.
+pub(super) fn track_from_meta(rec: &Recording) -> Option<f64> {
+    let valid = |x: f64| (x.is_finite() && x > 0.0).then_some(x);
+    if let Some(t) = rec
+        .meta("track")
+        .and_then(|s| s.split_whitespace().next()?.parse().ok())
+        .and_then(valid)
+    {
+        return Some(t);
+    }
+    if let Some(k) = rec.meta("kinematics") {
+        let mut it = k.split_whitespace();
+        while let Some(w) = it.next() {
+            if w == "track"
+                && let Some(x) = it
+                    .next()
+                    .and_then(|s| s.trim_end_matches(',').parse().ok())
+                    .and_then(valid)
+            {
+                return Some(x);
+            }
+        }
+    }
+    rec.meta("robot")
+        .and_then(wheelid_robots::RobotProfile::by_name)
+        .map(|p| p.track)
+}
+
+impl Data {
+    /// The report's view of a model in hand: its name, θ, validation fits and cost.
+    pub(super) fn stage(&self, cur: &Current) -> Stage {
+        let (channels, validation_cost) = self.validate(&cur.sim);
+        let model = self.model(&cur.candidates);
+        Stage {
+            model: std::iter::once("nominal")
+                .chain(cur.candidates.iter().map(|c| c.name()))
+                .collect::<Vec<_>>()
+                .join(" + "),
+            theta: cur.theta.clone(),
+            std_err: cur.std_err.clone(),
+            names: model.params().iter().map(|p| p.name.to_owned()).collect(),
+            channels,
+            validation_cost,
+        }
+    }
+}
+
+/// Training (even blocks) and validation (odd blocks) flags of every recording.
+fn split(recs: &[Recording], blocks: usize) -> Result<SplitMasks, DiagnoseError> {
+    let mut train = Vec::new();
+    let mut valid = Vec::new();
+    for r in recs {
+        let n = r.len();
+        if n < 10 * blocks {
+            return Err(DiagnoseError::Setting(format!(
+                "{}: {n} samples are too few to split into {blocks} blocks",
+                r.source.display(),
+            )));
+        }
+        let m: Vec<bool> = (0..n).map(|k| (k * blocks / n).is_multiple_of(2)).collect();
+        valid.push(m.iter().map(|b| !b).collect::<Vec<bool>>());
+        train.push(m);
+    }
+    Ok((train, valid))
+}
+
+/// Training and validation flags.
+type SplitMasks = (Vec<Vec<bool>>, Vec<Vec<bool>>);
+
+/// The nominal θ by output error on the training blocks, started from least squares (or,
+/// where least squares comes out unphysical — a long dead time makes the regression's θ1
+/// negative — from unit gains and time constants of 3 periods).
+fn nominal_fit(
+    recs: &[Recording],
+    train: &[Vec<bool>],
+    dt: f64,
+    model: &dyn RegressorModel,
+    settings: &DiagnoseSettings,
+) -> Result<OutputErrorFit, DiagnoseError> {
+    let ls = identify(
+        recs,
+        model,
+        &Ols::default(),
+        &IdentifySettings {
+            condition: settings.condition.clone(),
+            estimator: Estimator::Ls,
+            ..IdentifySettings::default()
+        },
+    )?;
+    let oe = OutputError {
+        mask: Some(train.to_vec()),
+        tolerance: NOMINAL_TOLERANCE,
+        ..OutputError::default()
+    };
+    let fallback = [3.0 * dt, 3.0 * dt, 0.0, 1.0, 0.0, 1.0];
+    let sane = [0, 1, 3, 5].iter().all(|&i| ls.theta[i] > 0.0);
+    Ok(
+        match oe.fit(model, recs, if sane { &ls.theta } else { &fallback }) {
+            Err(_) if sane => oe.fit(model, recs, &fallback)?,
+            other => other?,
+        },
+    )
+}
+
+/// Measured accelerations: the derivative of the zero-phase filtered response (zeros where
+/// the recording cannot be filtered).
+fn accelerations(recs: &[Recording], settings: &DiagnoseSettings) -> Outputs {
+    let cutoff = condition::suggest_cutoff(&recs.iter().collect::<Vec<_>>())
+        .map(|(f, _)| f)
+        .ok();
+    recs.iter()
+        .map(|r| {
+            let d = cutoff
+                .and_then(|fc| condition::condition(r, None, fc, &settings.condition).ok())
+                .and_then(|c| Some([c.differentiate(&c.v).ok()?, c.differentiate(&c.w).ok()?]));
+            d.unwrap_or_else(|| [vec![0.0; r.len()], vec![0.0; r.len()]])
+        })
+        .collect()
+}
+
+/// Step 1 and the nominal fit: the data prepared once for every later step, and the nominal
+/// output-error fit on the training blocks.
+///
+/// # Errors
+/// [`DiagnoseError`] for recordings that cannot be made uniform or split, or a failed fit.
+pub(super) fn prepare(
+    recordings: &[Recording],
+    model: &dyn RegressorModel,
+    settings: &DiagnoseSettings,
+) -> Result<(Data, OutputErrorFit), DiagnoseError> {
+    let recs: Vec<Recording> = recordings
+        .iter()
+        .map(|r| condition::make_uniform(r).map(|(u, _)| u))
+        .collect::<Result<_, _>>()?;
+    let (train, valid) = split(&recs, settings.blocks)?;
+    let dt = recs
+        .iter()
+        .map(|r| r.sampling().dt_median)
+        .fold(f64::INFINITY, f64::min);
+    let fit = nominal_fit(&recs, &train, dt, model, settings)?;
+    let track = settings
+        .track_m
+        .or_else(|| recs.iter().find_map(track_from_meta));
+    let accel = accelerations(&recs, settings);
+    let weight = [0, 1].map(|c| 1.0 / fit.noise_std[c].max(1e-12));
+    let data = Data {
+        recs,
+        train,
+        valid,
+        dt,
+        blocks: settings.blocks,
+        track,
+        weight,
+        accel,
+    };
+    Ok((data, fit))
+}

@@ -1,0 +1,169 @@
+//! Step 5 of the diagnosis: screen the nominees — where each fit starts ([`Search`]) and
+//! the training cost there, which orders the fits.
+
+use super::*;
+
+/// Where a candidate's fit starts: θ, bounds, held parameters, and the training cost there
+/// (the screen that orders the fits).
+pub(super) struct Start {
+    pub(super) theta: Vec<f64>,
+    pub(super) bounds: Vec<(f64, f64)>,
+    pub(super) pinned: Vec<usize>,
+    pub(super) cost: f64,
+}
+
+/// The start of `nominee`'s fit from its fingerprint's guess: dead times by a grid, Gauss–
+/// Newton steps shortened by a line search, inactive channels held at their null. `Err` if the
+/// guess is no such physics.
+pub(super) fn start_candidate(
+    data: &Data,
+    cur: &Current,
+    nominee: &Nominee,
+) -> std::result::Result<Start, String> {
+    let c = nominee.pattern.candidate;
+    let mut cands = cur.candidates.clone();
+    cands.push(c);
+    let model = data.model(&cands);
+    let base = cur.theta.len();
+    let mut guess = nominee.pattern.guess.clone();
+    let (t_lo, t_hi) = data.span();
+    let margin = 0.05 * (t_hi - t_lo);
+    let mut bounds = model_bounds(&cur.candidates, (t_lo + margin, t_hi - margin));
+    let cb = c.effect().bounds((t_lo + margin, t_hi - margin));
+    let search = c.effect().search();
+    for (g, &(lo, hi)) in guess.iter_mut().zip(&cb) {
+        let span = if hi.is_finite() && lo.is_finite() {
+            1e-3 * (hi - lo)
+        } else {
+            1e-6
+        };
+        *g = g.clamp(lo + span, hi - span);
+    }
+    // A friction or a loss that the residual asks to be negative is no such physics.
+    if c.effect().channels() == (EffectChannels::Each { positive: true })
+        && nominee.pattern.inactive.len() == 2
+    {
+        return Err(format!(
+            "its pattern asks for negative {} and {} ({:.3e}, {:.3e})",
+            c.params()[0].name,
+            c.params()[1].name,
+            nominee.pattern.guess[0],
+            nominee.pattern.guess[1]
+        ));
+    }
+    let frame = data.frame();
+    let mut theta = cur.theta.clone();
+    theta.extend_from_slice(&guess);
+    let training_cost = |th: &[f64]| {
+        simulate_all(&model, th, &data.recs, &cur.initial)
+            .map_or(f64::INFINITY, |y| frame.residuals(&y).norm_squared())
+    };
+    // A Gauss–Newton step from the null can overshoot far (a pattern nearly absorbed by θ):
+    // it is shortened to the best of a few fractions by the training cost.
+    if matches!(search, Search::Smooth | Search::ChangeTime) {
+        let null = c.effect().null(&cur.theta, theta[base]);
+        let step: Vec<f64> = (0..null.len())
+            .map(|j| {
+                if nominee.pattern.inactive.contains(&j) {
+                    0.0
+                } else {
+                    theta[base + j] - null[j]
+                }
+            })
+            .collect();
+        let mut best = (f64::INFINITY, 1.0);
+        for frac in [1.0, 0.5, 0.25, 0.1, 0.03, 0.01] {
+            let mut th = theta.clone();
+            for j in 0..null.len() {
+                th[base + j] = null[j] + frac * step[j];
+            }
+            let cost = training_cost(&th);
+            if cost < best.0 {
+                best = (cost, frac);
+            }
+        }
+        for j in 0..null.len() {
+            theta[base + j] = null[j] + best.1 * step[j];
+        }
+    }
+    // A limit's probe level is a rough reading of the data: scaled on a grid first.
+    if matches!(search, Search::Limit { .. }) {
+        let active: Vec<usize> = (0..2)
+            .filter(|j| !nominee.pattern.inactive.contains(j))
+            .collect();
+        theta = level_grid(&theta, base, &active, &training_cost);
+    }
+    // A dead time is searched on a grid first: its cost has many local minima.
+    if search == Search::DeadTime {
+        let mut best = (f64::INFINITY, guess[0]);
+        let mut d = 0.5 * data.dt;
+        let mut grid = vec![guess[0]];
+        while d <= 1.5 {
+            grid.push(d);
+            d *= 1.4;
+        }
+        for d in grid {
+            theta[base] = d;
+            let cost = training_cost(&theta);
+            if cost < best.0 {
+                best = (cost, d);
+            }
+        }
+        theta[base] = best.1;
+    }
+    bounds.extend(cb);
+    let mut pinned = cur.pinned.clone();
+    for &j in &nominee.pattern.inactive {
+        pinned.push(base + j);
+        theta[base + j] = c.effect().null(&cur.theta, 0.0)[j];
+    }
+    // A change time is not fitted by gradient: the training cost is flat while it sweeps a
+    // validation block. It is held, θ fitted, then the time scanned on a fine grid with that θ
+    // (the middle of the flat minimum taken), and θ fitted again if it moved.
+    if search == Search::ChangeTime {
+        pinned.push(base);
+    }
+    let cost = training_cost(&theta);
+    Ok(Start {
+        theta,
+        bounds,
+        pinned,
+        cost,
+    })
+}
+
+/// θ with a limit's `active` channels (0: v, 1: ω) scaled: their level (θ[base + j], unless
+/// it never binds) by `level`, their θ1 or θ2 (θ[j]) by `lag`.
+pub(super) fn scaled(
+    theta: &[f64],
+    base: usize,
+    active: &[usize],
+    level: f64,
+    lag: f64,
+) -> Vec<f64> {
+    let mut th = theta.to_vec();
+    for &j in active {
+        if th[base + j] < NEVER {
+            th[base + j] *= level;
+        }
+        th[j] *= lag;
+    }
+    th
+}
+
+/// A limit's level scaled by the best of a few factors (0.5…2) by `cost`.
+pub(super) fn level_grid(
+    theta: &[f64],
+    base: usize,
+    active: &[usize],
+    cost: &dyn Fn(&[f64]) -> f64,
+) -> Vec<f64> {
+    let mut best = (cost(theta), 1.0);
+    for f in [0.5, 0.7, 0.85, 1.2, 1.5, 2.0] {
+        let c = cost(&scaled(theta, base, active, f, 1.0));
+        if c < best.0 {
+            best = (c, f);
+        }
+    }
+    scaled(theta, base, active, best.1, 1.0)
+}

@@ -1,0 +1,342 @@
+//! Steps 2–7 of the diagnosis as a forward search: test the residuals and every candidate's
+//! fingerprint (Holm over the family), screen and fit the nominees in order, accept the first
+//! that passes, drop what it makes redundant, and look again from the extended model.
+
+use super::*;
+
+/// What the search found.
+pub(super) struct Outcome {
+    /// The final model in hand.
+    pub(super) cur: Current,
+    pub(super) findings: Vec<Finding>,
+    pub(super) rejected: Vec<Rejected>,
+    /// Fingerprints of each round.
+    pub(super) rounds: Vec<Vec<Fingerprint>>,
+    /// The first round's test family.
+    pub(super) tests: Vec<TestResult>,
+    pub(super) mismatch: bool,
+}
+
+/// One round's tests: the nominees and which the Holm family nominates, with the basis of
+/// the fit's Jacobian and the weighted residual they were scored against.
+struct Round {
+    nominees: Vec<Nominee>,
+    nominated: Vec<bool>,
+    p_values: Vec<f64>,
+    decisions: Vec<bool>,
+    jacobian: DMatrix<f64>,
+    q: DMatrix<f64>,
+}
+
+/// The fit's own Jacobian at θ̂ where it gave one, else the sensitivities anew.
+fn jacobian_of(data: &Data, cur: &Current) -> Option<DMatrix<f64>> {
+    if let Some(j) = &cur.jacobian {
+        return Some(j.clone());
+    }
+    let model = data.model(&cur.candidates);
+    let pinned = Pinned::new(&model, cur.theta.clone(), &cur.pinned);
+    score::jacobian(
+        &pinned,
+        &pinned.free_values(),
+        &cur.initial,
+        &cur.sim,
+        &data.frame(),
+    )
+}
+
+/// Scores every pending candidate's fingerprint (one thread each) and runs the family
+/// (residual–command independence on the validation blocks, then the fingerprints) through
+/// Holm's correction.
+fn test_round(
+    data: &Data,
+    cur: &Current,
+    pending: &[Candidate],
+    here: &Location,
+    alpha: f64,
+) -> Option<Round> {
+    let jacobian = jacobian_of(data, cur)?;
+    let q = score::basis(&jacobian);
+    let e = data.frame().residuals(&cur.sim);
+    let nominees: Vec<Nominee> = std::thread::scope(|scope| {
+        let handles: Vec<_> = pending
+            .iter()
+            .map(|&c| {
+                let (q, e) = (&q, &e);
+                scope.spawn(move || fingerprint(c, data, cur, q, e))
+            })
+            .collect();
+        handles
+            .into_iter()
+            .filter_map(|h| h.join().ok().flatten())
+            .collect()
+    });
+    let mut p_values = here.p_values();
+    p_values.extend(nominees.iter().map(|n| n.p_value));
+    let decisions = holm(&p_values, alpha);
+    Some(Round {
+        nominated: decisions[4..].to_vec(),
+        nominees,
+        p_values,
+        decisions,
+        jacobian,
+        q,
+    })
+}
+
+/// The first round's family as the report lists it.
+fn family(round: &Round) -> Vec<TestResult> {
+    let mut tests = Vec::new();
+    for (i, ch) in ["v", "w"].iter().enumerate() {
+        for (k, u) in ["v_ref", "w_ref"].iter().enumerate() {
+            tests.push(TestResult {
+                name: format!("{ch} residual independent of {u}"),
+                p_value: round.p_values[2 * i + k],
+                significant: round.decisions[2 * i + k],
+            });
+        }
+    }
+    for (n, (&p, &d)) in round
+        .nominees
+        .iter()
+        .zip(round.p_values[4..].iter().zip(&round.decisions[4..]))
+    {
+        tests.push(TestResult {
+            name: format!("fingerprint of {}", n.pattern.candidate.name()),
+            p_value: p,
+            significant: d,
+        });
+    }
+    tests
+}
+
+/// The round's fingerprints as the report lists them.
+fn fingerprints(round: &Round) -> Vec<Fingerprint> {
+    round
+        .nominees
+        .iter()
+        .zip(&round.nominated)
+        .map(|(n, &d)| Fingerprint {
+            effect: n.pattern.candidate.name().into(),
+            channels: channels_of(n.pattern.candidate, |j| !n.pattern.inactive.contains(&j)),
+            stat: n.score.stat,
+            dof: n.score.dof,
+            p_value: n.p_value,
+            nominated: d,
+            evidence: n.pattern.evidence.clone(),
+        })
+        .collect()
+}
+
+/// The nominated candidates, the most significant first (then the larger statistic per degree
+/// of freedom).
+fn order(round: &Round) -> Vec<usize> {
+    let mut order: Vec<usize> = (0..round.nominees.len())
+        .filter(|&i| round.nominated[i])
+        .collect();
+    order.sort_by(|&a, &b| {
+        let (na, nb) = (&round.nominees[a], &round.nominees[b]);
+        na.p_value.total_cmp(&nb.p_value).then(
+            (nb.score.stat / nb.score.dof as f64).total_cmp(&(na.score.stat / na.score.dof as f64)),
+        )
+    });
+    order
+}
+
+/// Screens the nominated candidates ([`order`]; their starts, in parallel), then fits them in the order of
+/// their training cost there and returns the first that [`verdict`] accepts. Every candidate
+/// screened joins `tried`; every one turned down joins `out.rejected`.
+fn first_accepted(
+    data: &Data,
+    cur: &Current,
+    round: &Round,
+    settings: &DiagnoseSettings,
+    progress: &Progress<'_>,
+    tried: &mut Vec<Candidate>,
+    out: &mut Outcome,
+) -> Option<(usize, Current, Channels, f64)> {
+    let rejected = &mut out.rejected;
+    let order = order(round);
+    progress.add_work(order.len() as u64 + 1);
+    let starts: Vec<(usize, std::result::Result<Start, String>)> = std::thread::scope(|sc| {
+        let handles: Vec<_> = order
+            .iter()
+            .map(|&i| {
+                let n = &round.nominees[i];
+                sc.spawn(move || (i, start_candidate(data, cur, n)))
+            })
+            .collect();
+        handles.into_iter().filter_map(|h| h.join().ok()).collect()
+    });
+    let mut ready = Vec::new();
+    for (i, st) in starts {
+        let c = round.nominees[i].pattern.candidate;
+        tried.push(c);
+        match st {
+            Ok(st) => ready.push((i, st)),
+            Err(reason) => rejected.push(Rejected {
+                effect: c.name().into(),
+                reason,
+            }),
+        }
+    }
+    ready.sort_by(|a, b| a.1.cost.total_cmp(&b.1.cost));
+    let context = Context {
+        data,
+        cur,
+        nominees: &round.nominees,
+        nominated: &round.nominated,
+        jacobian: &round.jacobian,
+        q: &round.q,
+        settings,
+    };
+    for (i, st) in ready {
+        let c = round.nominees[i].pattern.candidate;
+        progress.step(&format!("fitting {}", c.name()), 1);
+        match fit_candidate(data, cur, &round.nominees[i], st)
+            .and_then(|(new, _)| verdict(&context, i, new))
+        {
+            Ok((new, after, drop)) => return Some((i, new, after, drop)),
+            Err(reason) => rejected.push(Rejected {
+                effect: c.name().into(),
+                reason,
+            }),
+        }
+    }
+    None
+}
+
+/// The finding for nominee `n` accepted into `new` (its parameters as fitted; the final
+/// model's values are filled in by the report).
+fn finding(n: &Nominee, new: &Current, after: &Channels, drop: f64) -> Finding {
+    let c = n.pattern.candidate;
+    let base = new.theta.len() - c.params().len();
+    let mut parameters = BTreeMap::new();
+    let mut std_err = BTreeMap::new();
+    for (j, info) in c.params().iter().enumerate() {
+        // A change time is held during the fit but found by its own scan.
+        let scanned = c.effect().search() == Search::ChangeTime && j == 0;
+        if scanned || !new.pinned.contains(&(base + j)) {
+            parameters.insert(info.name.to_owned(), new.theta[base + j]);
+            std_err.insert(info.name.to_owned(), new.std_err[base + j]);
+        }
+    }
+    Finding {
+        effect: c.name().into(),
+        channels: channels_of(c, |j| !new.pinned.contains(&(base + j))),
+        parameters,
+        std_err,
+        evidence: format!(
+            "fingerprint χ²({}) = {:.1}, p = {:.1e}: {}; validation cost −{:.1} %",
+            n.score.dof,
+            n.score.stat,
+            n.p_value,
+            n.pattern.evidence,
+            100.0 * drop
+        ),
+        fit_percent_after: BTreeMap::from([
+            ("v".to_owned(), after.v.fit_percent),
+            ("w".to_owned(), after.w.fit_percent),
+        ]),
+        validation_cost_drop_percent: 100.0 * drop,
+    }
+}
+
+/// Backward step: an effect added before `added` that it makes redundant (without it the
+/// validation cost rises by less than `min_improvement`) is removed, and joins `tried`.
+fn backward_step(
+    data: &Data,
+    cur: Current,
+    added: Candidate,
+    min_improvement: f64,
+    out: &mut Outcome,
+    tried: &mut Vec<Candidate>,
+) -> Current {
+    if cur.candidates.len() < 2 {
+        return cur;
+    }
+    let (_, cost_with) = data.validate(&cur.sim);
+    for k in (0..cur.candidates.len() - 1).rev() {
+        let Ok(without) = remove_candidate(data, &cur, k) else {
+            continue;
+        };
+        let (_, cost_without) = data.validate(&without.sim);
+        let rise = cost_without / cost_with - 1.0;
+        if rise < min_improvement {
+            let gone = cur.candidates[k];
+            out.findings.retain(|f| f.effect != gone.name());
+            out.rejected.push(Rejected {
+                effect: gone.name().into(),
+                reason: format!(
+                    "redundant once {} is in: without it the validation cost rises by {:.1} % \
+                     only",
+                    added.name(),
+                    100.0 * rise
+                ),
+            });
+            tried.push(gone);
+            return without;
+        }
+    }
+    cur
+}
+
+/// Runs the search from the nominal model `cur` (module docs, steps 2–7).
+pub(super) fn run(
+    data: &Data,
+    mut cur: Current,
+    settings: &DiagnoseSettings,
+    location: &Location,
+    progress: &Progress<'_>,
+) -> Result<Outcome, DiagnoseError> {
+    let max_lag = data.max_lag(settings);
+    let mut out = Outcome {
+        cur: cur.clone(),
+        findings: Vec::new(),
+        rejected: Vec::new(),
+        rounds: Vec::new(),
+        tests: Vec::new(),
+        mismatch: false,
+    };
+    let mut tried: Vec<Candidate> = Vec::new();
+    for round_no in 0..=settings.max_effects {
+        let pending: Vec<Candidate> = settings
+            .candidates
+            .iter()
+            .copied()
+            .filter(|c| !cur.candidates.contains(c) && !tried.contains(c))
+            .collect();
+        let here = if round_no == 0 {
+            location.clone()
+        } else {
+            locate::locate(&data.recs, &cur.sim, &data.valid, data.dt, max_lag)
+        };
+        let Some(round) = test_round(data, &cur, &pending, &here, settings.alpha) else {
+            break;
+        };
+        if round_no == 0 {
+            out.tests = family(&round);
+            out.mismatch = round.decisions.iter().any(|&d| d);
+        }
+        out.rounds.push(fingerprints(&round));
+        if round_no == settings.max_effects || !out.mismatch {
+            break;
+        }
+        let accepted = first_accepted(data, &cur, &round, settings, progress, &mut tried, &mut out);
+        let Some((i, new, after, drop)) = accepted else {
+            break;
+        };
+        let n = &round.nominees[i];
+        out.findings.push(finding(n, &new, &after, drop));
+        tried.clear();
+        cur = backward_step(
+            data,
+            new,
+            n.pattern.candidate,
+            settings.min_improvement,
+            &mut out,
+            &mut tried,
+        );
+    }
+    out.cur = cur;
+    Ok(out)
+}
