@@ -108,23 +108,8 @@ pub(super) fn fit_candidate(
     // screen: a fast lag with a ramp also imitates a dead time, which must still rank first
     // where it is one.
     let active: Vec<usize> = (0..2).filter(|j| !pinned.contains(&(base + j))).collect();
-    let alternative = (search == Search::Limit { rate: true }).then(|| {
-        let training_cost = |th: &[f64]| {
-            simulate_all(&model, th, &data.recs, &cur.initial)
-                .map_or(f64::INFINITY, |y| frame.residuals(&y).norm_squared())
-        };
-        let mut best = (f64::INFINITY, 1.0, 1.0);
-        for lag in [0.3, 0.1, 0.03] {
-            for level in [0.5, 1.0, 2.0] {
-                let cost = training_cost(&scaled(&theta, base, &active, level, lag));
-                if cost < best.0 {
-                    best = (cost, level, lag);
-                }
-            }
-        }
-        let from = scaled(&theta, base, &active, best.1, best.2);
-        level_grid(&from, base, &active, &training_cost)
-    });
+    let alternative = (search == Search::Limit { rate: true })
+        .then(|| shortened_lags(data, cur, &model, &theta, base, &active));
     if let Some(alt) = alternative
         && let Ok(r) = run(&alt, &pinned)
         && first.as_ref().map_or(true, |f| cost(&r) < cost(f))
@@ -158,30 +143,15 @@ pub(super) fn fit_candidate(
     if search == Search::ChangeTime {
         let step = (t_hi - t_lo) / (nominee.pattern.grid + 1) as f64;
         let t0 = full[base];
-        let scan: Vec<(f64, f64)> = (-16..=16)
-            .map(|i| {
+        let (lo, hi) = flat_minimum(
+            (-16..=16).map(|i| (t0 + step * i as f64 / 16.0).clamp(t_lo + margin, t_hi - margin)),
+            |t| {
                 let mut th = full.clone();
-                th[base] = (t0 + step * i as f64 / 16.0).clamp(t_lo + margin, t_hi - margin);
-                let cost = simulate_all(&model, &th, &data.recs, &fit.initial)
-                    .map_or(f64::INFINITY, |y| frame.residuals(&y).norm_squared());
-                (th[base], cost)
-            })
-            .collect();
-        // The contiguous run of near-minimal points around the least one.
-        let (arg, least) =
-            scan.iter().enumerate().fold(
-                (0, f64::INFINITY),
-                |a, (i, x)| if x.1 < a.1 { (i, x.1) } else { a },
-            );
-        let near = |i: usize| scan[i].1 <= least * (1.0 + 1e-6) + 1e-12;
-        let (mut a, mut b) = (arg, arg);
-        while a > 0 && near(a - 1) {
-            a -= 1;
-        }
-        while b + 1 < scan.len() && near(b + 1) {
-            b += 1;
-        }
-        let (lo, hi) = (scan[a].0, scan[b].0);
+                th[base] = t;
+                simulate_all(&model, &th, &data.recs, &fit.initial)
+                    .map_or(f64::INFINITY, |y| frame.residuals(&y).norm_squared())
+            },
+        );
         time_resolution = 0.5 * (hi - lo) + step / 32.0;
         let t_best = 0.5 * (lo + hi);
         if (t_best - t0).abs() > 1e-9 {
@@ -195,25 +165,7 @@ pub(super) fn fit_candidate(
         // The weakest channel is dropped while more than one is fitted and one is weak (a
         // parameter that another absorbs, e.g. a turning loss |v|·ω that θ5 v·ω stands for when
         // v keeps its sign, also blurs its partner).
-        loop {
-            let z: Vec<(usize, f64)> = (0..2)
-                .filter_map(|j| {
-                    let a = free.iter().position(|&i| i == base + j)?;
-                    let (x, se) = (full[base + j], fit.std_err[a]);
-                    // A limit that hardly binds counts as weak whatever its interval.
-                    let idle = c
-                        .effect()
-                        .binding(&data.recs, j, x)
-                        .is_some_and(|f| f < 0.01);
-                    Some((j, if se > 0.0 && !idle { x.abs() / se } else { 0.0 }))
-                })
-                .collect();
-            let Some(&(j, zmin)) = z.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
-                break;
-            };
-            if z.len() < 2 || zmin >= 3.0 {
-                break;
-            }
+        while let Some(j) = weak_channel(c, data, &fit, &full, &free, base) {
             // From the start again: the weak pair may have wandered along their valley.
             let mut th = theta.clone();
             pinned.push(base + j);
@@ -227,6 +179,84 @@ pub(super) fn fit_candidate(
         new.std_err[base] = time_resolution;
     }
     Ok((new, fit))
+}
+
+/// A rate limit the nominal model lacks is traded for a slower lag (θ1, θ2 too large, a limit
+/// then hardly binds): the start with the `active` channels' θ1, θ2 shortened and the level
+/// scaled, on a coarse grid by the training cost, then the level's grid.
+fn shortened_lags(
+    data: &Data,
+    cur: &Current,
+    model: &Extended,
+    theta: &[f64],
+    base: usize,
+    active: &[usize],
+) -> Vec<f64> {
+    let frame = data.frame();
+    let training_cost = |th: &[f64]| {
+        simulate_all(model, th, &data.recs, &cur.initial)
+            .map_or(f64::INFINITY, |y| frame.residuals(&y).norm_squared())
+    };
+    let mut best = (f64::INFINITY, 1.0, 1.0);
+    for lag in [0.3, 0.1, 0.03] {
+        for level in [0.5, 1.0, 2.0] {
+            let cost = training_cost(&scaled(theta, base, active, level, lag));
+            if cost < best.0 {
+                best = (cost, level, lag);
+            }
+        }
+    }
+    let from = scaled(theta, base, active, best.1, best.2);
+    level_grid(&from, base, active, &training_cost)
+}
+
+/// The ends of the contiguous run of near-minimal costs around the least one, over the
+/// `times` (in order) with cost `cost`: the flat minimum of a change time, whose cost does not
+/// move while it sweeps a validation block.
+fn flat_minimum(times: impl Iterator<Item = f64>, cost: impl Fn(f64) -> f64) -> (f64, f64) {
+    let scan: Vec<(f64, f64)> = times.map(|t| (t, cost(t))).collect();
+    let (arg, least) =
+        scan.iter().enumerate().fold(
+            (0, f64::INFINITY),
+            |a, (i, x)| {
+                if x.1 < a.1 { (i, x.1) } else { a }
+            },
+        );
+    let near = |i: usize| scan[i].1 <= least * (1.0 + 1e-6) + 1e-12;
+    let (mut a, mut b) = (arg, arg);
+    while a > 0 && near(a - 1) {
+        a -= 1;
+    }
+    while b + 1 < scan.len() && near(b + 1) {
+        b += 1;
+    }
+    (scan[a].0, scan[b].0)
+}
+
+/// Of a per-channel candidate with both channels fitted, the channel whose parameter is weak
+/// (below 3 σ, or a limit that binds on < 1 % of the samples), the weaker if both; `None`
+/// when one channel alone is fitted or both are strong.
+fn weak_channel(
+    c: Candidate,
+    data: &Data,
+    fit: &OutputErrorFit,
+    full: &[f64],
+    free: &[usize],
+    base: usize,
+) -> Option<usize> {
+    let z: Vec<(usize, f64)> = (0..2)
+        .filter_map(|j| {
+            let a = free.iter().position(|&i| i == base + j)?;
+            let (x, se) = (full[base + j], fit.std_err[a]);
+            let idle = c
+                .effect()
+                .binding(&data.recs, j, x)
+                .is_some_and(|f| f < 0.01);
+            Some((j, if se > 0.0 && !idle { x.abs() / se } else { 0.0 }))
+        })
+        .collect();
+    let &(j, zmin) = z.iter().min_by(|a, b| a.1.total_cmp(&b.1))?;
+    (z.len() == 2 && zmin < 3.0).then_some(j)
 }
 
 /// An output-error fit of some parameters: the fit, the full θ, the free indices.

@@ -61,30 +61,7 @@ pub(super) fn start_candidate(
     // A Gauss–Newton step from the null can overshoot far (a pattern nearly absorbed by θ):
     // it is shortened to the best of a few fractions by the training cost.
     if matches!(search, Search::Smooth | Search::ChangeTime) {
-        let null = c.effect().null(&cur.theta, theta[base]);
-        let step: Vec<f64> = (0..null.len())
-            .map(|j| {
-                if nominee.pattern.inactive.contains(&j) {
-                    0.0
-                } else {
-                    theta[base + j] - null[j]
-                }
-            })
-            .collect();
-        let mut best = (f64::INFINITY, 1.0);
-        for frac in [1.0, 0.5, 0.25, 0.1, 0.03, 0.01] {
-            let mut th = theta.clone();
-            for j in 0..null.len() {
-                th[base + j] = null[j] + frac * step[j];
-            }
-            let cost = training_cost(&th);
-            if cost < best.0 {
-                best = (cost, frac);
-            }
-        }
-        for j in 0..null.len() {
-            theta[base + j] = null[j] + best.1 * step[j];
-        }
+        shorten_step(&mut theta, cur, nominee, base, &training_cost);
     }
     // A limit's probe level is a rough reading of the data: scaled on a grid first.
     if matches!(search, Search::Limit { .. }) {
@@ -95,21 +72,7 @@ pub(super) fn start_candidate(
     }
     // A dead time is searched on a grid first: its cost has many local minima.
     if search == Search::DeadTime {
-        let mut best = (f64::INFINITY, guess[0]);
-        let mut d = 0.5 * data.dt;
-        let mut grid = vec![guess[0]];
-        while d <= 1.5 {
-            grid.push(d);
-            d *= 1.4;
-        }
-        for d in grid {
-            theta[base] = d;
-            let cost = training_cost(&theta);
-            if cost < best.0 {
-                best = (cost, d);
-            }
-        }
-        theta[base] = best.1;
+        theta[base] = dead_time_grid(&theta, base, data.dt, &training_cost);
     }
     bounds.extend(cb);
     let mut pinned = cur.pinned.clone();
@@ -130,6 +93,64 @@ pub(super) fn start_candidate(
         pinned,
         cost,
     })
+}
+
+/// A Gauss–Newton step from the null can overshoot far (a pattern nearly absorbed by θ): the
+/// candidate's parameters in `theta` moved to the best of a few fractions of the step by
+/// `cost` (inactive channels stay at their null).
+fn shorten_step(
+    theta: &mut [f64],
+    cur: &Current,
+    nominee: &Nominee,
+    base: usize,
+    cost: &dyn Fn(&[f64]) -> f64,
+) {
+    let c = nominee.pattern.candidate;
+    let null = c.effect().null(&cur.theta, theta[base]);
+    let step: Vec<f64> = (0..null.len())
+        .map(|j| {
+            if nominee.pattern.inactive.contains(&j) {
+                0.0
+            } else {
+                theta[base + j] - null[j]
+            }
+        })
+        .collect();
+    let mut best = (f64::INFINITY, 1.0);
+    for frac in [1.0, 0.5, 0.25, 0.1, 0.03, 0.01] {
+        let mut th = theta.to_vec();
+        for j in 0..null.len() {
+            th[base + j] = null[j] + frac * step[j];
+        }
+        let c = cost(&th);
+        if c < best.0 {
+            best = (c, frac);
+        }
+    }
+    for j in 0..null.len() {
+        theta[base + j] = null[j] + best.1 * step[j];
+    }
+}
+
+/// A dead time (θ[base]) by `cost` on the guess and a geometric grid from half a sample `dt`
+/// to 1.5 s (its cost has many local minima).
+fn dead_time_grid(theta: &[f64], base: usize, dt: f64, cost: &dyn Fn(&[f64]) -> f64) -> f64 {
+    let mut th = theta.to_vec();
+    let mut best = (f64::INFINITY, theta[base]);
+    let mut grid = vec![theta[base]];
+    let mut d = 0.5 * dt;
+    while d <= 1.5 {
+        grid.push(d);
+        d *= 1.4;
+    }
+    for d in grid {
+        th[base] = d;
+        let c = cost(&th);
+        if c < best.0 {
+            best = (c, d);
+        }
+    }
+    best.1
 }
 
 /// θ with a limit's `active` channels (0: v, 1: ω) scaled: their level (θ[base + j], unless
