@@ -321,15 +321,27 @@ pub fn diagnosis_text(d: &Diagnosis) -> String {
             if t.significant { "SIGNIFICANT" } else { "" }
         );
     }
-    let _ = writeln!(
-        s,
-        "   → {}",
-        if d.mismatch {
-            "mismatch: evidence survives Holm's correction"
-        } else {
-            "no mismatch: nothing survives Holm's correction; the model is kept as it is"
+    let tested = d.tests.iter().any(|t| t.significant);
+    let low: Vec<String> = [("v", d.nominal.channels.v), ("ω", d.nominal.channels.w)]
+        .iter()
+        .filter(|(_, c)| c.fit_percent < crate::diagnose::LOW_FIT_PERCENT)
+        .map(|(n, c)| format!("{n}'s validation fit is {:.1} %", c.fit_percent))
+        .collect();
+    let verdict = match (tested, low.is_empty()) {
+        (true, _) => "mismatch: evidence survives Holm's correction".to_string(),
+        (false, false) => format!(
+            "mismatch: {} (below {:.0} %), though no test survives Holm's correction",
+            low.join(", "),
+            crate::diagnose::LOW_FIT_PERCENT
+        ),
+        (false, true) if d.mismatch => {
+            "mismatch: what the final model leaves is unexplained".into()
         }
-    );
+        (false, true) => {
+            "no mismatch: nothing survives Holm's correction; the model is kept as it is".into()
+        }
+    };
+    let _ = writeln!(s, "   → {verdict}");
     let _ = writeln!(s, "3. Locate (nominal residual):");
     for (c, ch) in d.location.channels.iter().enumerate() {
         let _ = writeln!(
