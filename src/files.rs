@@ -10,6 +10,11 @@
 //! [channels.v]
 //! r2 = 0.999
 //! fit_percent = 97.1
+//! # from `wheelid diagnose --out`: the effects found, in their units
+//! [effects.input_delay]
+//! delay_s = 0.149
+//! [effects_std_err.input_delay]
+//! delay_s = 0.002
 //! ```
 //!
 //! Bounds, either on θ directly or as intervals on the physical constants of the chosen model
@@ -62,6 +67,15 @@ pub struct ModelFile {
     pub samples: usize,
     /// Per-channel quality.
     pub channels: BTreeMap<String, ChannelQuality>,
+    /// Effects a diagnosis added (`wheelid diagnose --out`), by name, with their fitted
+    /// parameters in the effect's units (`[effects.input_delay] delay_s = 0.15`; a limit's
+    /// channel that never bound is absent). The names and parameters are those of
+    /// `wheelid_models::effects` and of the simulator's `[simulation.effects.*]`.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub effects: BTreeMap<String, BTreeMap<String, f64>>,
+    /// Standard errors of `effects`, same shape.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub effects_std_err: BTreeMap<String, BTreeMap<String, f64>>,
 }
 
 impl ModelFile {
@@ -86,6 +100,42 @@ impl ModelFile {
                         },
                     )
                 })
+                .collect(),
+            effects: BTreeMap::new(),
+            effects_std_err: BTreeMap::new(),
+        }
+    }
+
+    /// The file content of a diagnosis of the `model` parameterization: θ1…θ6 of its final
+    /// (extended) model, its validation fits (R² not computed: NaN is not written, 0), and the
+    /// effects it found with their parameters. `cutoff_hz` is 0: the fit is output error on
+    /// the raw samples.
+    pub fn from_diagnosis(d: &crate::diagnose::Diagnosis, model: &str) -> Self {
+        let stage = &d.final_stage;
+        let quality = |c: &crate::diagnose::ChannelFit| ChannelQuality {
+            r2: 0.0,
+            fit_percent: c.fit_percent,
+        };
+        Self {
+            model: model.to_owned(),
+            estimator: Some("oe".into()),
+            theta: stage.theta[..6].to_vec(),
+            std_err: stage.std_err[..6].to_vec(),
+            cutoff_hz: 0.0,
+            samples: d.series.iter().map(|s| s.t.len()).sum(),
+            channels: BTreeMap::from([
+                ("v".to_owned(), quality(&stage.channels.v)),
+                ("w".to_owned(), quality(&stage.channels.w)),
+            ]),
+            effects: d
+                .findings
+                .iter()
+                .map(|f| (f.effect.clone(), f.parameters.clone().into_iter().collect()))
+                .collect(),
+            effects_std_err: d
+                .findings
+                .iter()
+                .map(|f| (f.effect.clone(), f.std_err.clone().into_iter().collect()))
                 .collect(),
         }
     }

@@ -84,6 +84,10 @@ struct SimulateArgs {
     /// Report the exact v, ω and pose instead of the encoder model.
     #[arg(long)]
     exact: bool,
+    /// Simulator backend: a model file (from `identify --out` or `diagnose --out`) whose θ and
+    /// `[effects.*]` replace the robot's θ and the config's effects.
+    #[arg(long)]
+    model: Option<PathBuf>,
     /// Output file: CSV, or a ROS 2 bag (`.mcap`: /cmd_vel Twist, /odom Odometry).
     #[arg(long, short)]
     out: PathBuf,
@@ -243,12 +247,18 @@ fn run_simulate(a: SimulateArgs) -> Result<()> {
             RobotProfile::NAMES.join(", ")
         );
     }
-    let robot = robot_profile(
+    let mut robot = robot_profile(
         a.robot.as_deref(),
         cfg.robot.as_deref(),
         cfg.profile.as_ref(),
     )?;
     let mut sim = cfg.simulation.clone();
+    if let Some(m) = &a.model {
+        let file = ModelFile::read(m)?;
+        robot.theta.copy_from_slice(&file.theta);
+        sim.effects = wheelid::robots::Effects::from_found(&robot.theta, &file.effects)
+            .with_context(|| format!("{}: [effects]", m.display()))?;
+    }
     if let Some(d) = a.duration {
         sim.duration_s = d;
     }
@@ -545,6 +555,10 @@ struct DiagnoseArgs {
     /// Write PNG plots into this directory.
     #[arg(long)]
     plot: Option<PathBuf>,
+    /// Write the final (extended) model as TOML: θ and `[effects.*]` with their parameters
+    /// (readable by `track --model` and `simulate --model`).
+    #[arg(long)]
+    out: Option<PathBuf>,
     /// Print the report as JSON.
     #[arg(long)]
     json: bool,
@@ -600,6 +614,13 @@ fn run_diagnose(a: DiagnoseArgs) -> Result<()> {
     let plot = a.plot.clone().or(cfg.plot.map(|p| base.join(p)));
     if let Some(dir) = &plot {
         list_plots(&wheelid::plot::write_diagnosis_plots(&d, dir)?, a.json);
+    }
+    if let Some(out) = &a.out {
+        let name = name.as_deref().unwrap_or("vw-pd");
+        ModelFile::from_diagnosis(&d, name).write(out)?;
+        if !a.json {
+            println!("written: {}", out.display());
+        }
     }
     Ok(())
 }

@@ -420,6 +420,16 @@ pub fn diagnosis_text(d: &Diagnosis) -> String {
         d.final_stage.model,
         fits(&d.final_stage.channels)
     );
+    if !d.findings.is_empty() {
+        let f = &d.final_stage;
+        let params: Vec<String> = f
+            .names
+            .iter()
+            .zip(f.theta.iter().zip(&f.std_err))
+            .map(|(n, (x, e))| format!("{n} {x:.4}±{e:.4}"))
+            .collect();
+        let _ = writeln!(s, "   refitted: {}", params.join(", "));
+    }
     let _ = writeln!(s, "   ({:.2} s)", d.seconds);
     s
 }

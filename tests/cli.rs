@@ -373,6 +373,56 @@ fn physics_simulate_identify_track() {
     assert!(rms_ones > 20.0 * rms, "θ̂ = 1: {rms_ones} m vs {rms} m");
 }
 
+/// `diagnose --out` writes the extended model (θ and the effects found, in their units; a
+/// limit's idle channel absent, no 10⁶ placeholder in the JSON either), and `simulate --model`
+/// drives the simulator with it: the built-in case (150 ms dead time, 1 rad/s yaw-rate limit)
+/// round-trips, and the simulated |ω| then stays under the limit's steady state w_max/θ6.
+#[test]
+fn diagnose_out_writes_the_extended_model_that_simulate_uses() {
+    let dir = tempfile::tempdir().expect("tmp");
+    let p = |f: &str| dir.path().join(f).to_str().expect("utf8").to_string();
+    let o = wheelid(&["diagnose", "--out", &p("m.toml"), "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON only");
+    let names = v["final"]["names"].as_array().expect("names");
+    assert!(
+        !names.iter().any(|n| n == "v_max"),
+        "idle channel left out: {names:?}"
+    );
+    let all_small = v["final"]["theta"]
+        .as_array()
+        .expect("theta")
+        .iter()
+        .all(|x| x.as_f64().is_some_and(|x| x.abs() < 1e3));
+    assert!(all_small, "no placeholder values: {}", v["final"]["theta"]);
+    let m = wheelid::files::ModelFile::read(std::path::Path::new(&p("m.toml"))).expect("reads");
+    let delay = m.effects["input_delay"]["delay_s"];
+    let w_max = m.effects["velocity_saturation"]["w_max"];
+    assert!((delay - 0.15).abs() < 0.0075, "delay {delay}");
+    assert!((w_max - 1.0).abs() < 0.05, "w_max {w_max}");
+    assert!(!m.effects["velocity_saturation"].contains_key("v_max"));
+    let o = wheelid(&[
+        "simulate",
+        "--model",
+        &p("m.toml"),
+        "--duration",
+        "60",
+        "--out",
+        &p("s.csv"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("input_delay, velocity_saturation"));
+    let rec = wheelid::core::Recording::read_csv(p("s.csv")).expect("reads");
+    let top = rec.w.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+    let command_top = rec.w_ref.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+    assert!(
+        command_top > 1.2 * w_max,
+        "the commands ask for more: {command_top}"
+    );
+    // Measured: 1.027 × w_max/θ6 (θ5 v ω and encoder noise on top of the steady state).
+    assert!(top < 1.05 * w_max / m.theta[5], "|ω| ≤ {top}");
+}
+
 #[test]
 fn bad_simulate_and_track_configs_name_file_line_and_column() {
     let dir = tempfile::tempdir().expect("tmp");

@@ -178,6 +178,94 @@ fn check(ok: bool, what: &str, value: f64) -> Result<()> {
 }
 
 impl Effects {
+    /// The effects a diagnosis found (a model file's `[effects.*]` tables: effect name →
+    /// parameter name → value, the names of `wheelid_models::effects`) on a robot whose θ
+    /// before any payload change is `theta`. A limit's channel that was not found is set
+    /// where it never binds (10⁶); `payload_change`'s θ1, θ2, θ3, θ5 after the change join
+    /// θ4, θ6 of `theta`. The result is validated.
+    ///
+    /// # Errors
+    /// [`Error::InvalidSetting`] for an unknown effect, a missing parameter, or a value out of
+    /// its range.
+    pub fn from_found(
+        theta: &[f64; 6],
+        found: &std::collections::BTreeMap<String, std::collections::BTreeMap<String, f64>>,
+    ) -> Result<Self> {
+        const NEVER: f64 = 1e6;
+        let mut e = Effects::default();
+        for (name, p) in found {
+            let get = |k: &str| {
+                p.get(k).copied().ok_or_else(|| {
+                    Error::InvalidSetting(format!("effect {name}: parameter {k} missing"))
+                })
+            };
+            let or_never = |k: &str| p.get(k).copied().unwrap_or(NEVER);
+            match name.as_str() {
+                "input_delay" => {
+                    e.input_delay = Some(InputDelay {
+                        delay_s: get("delay_s")?,
+                    })
+                }
+                "acceleration_limit" => {
+                    e.acceleration_limit = Some(AccelerationLimit {
+                        v_accel_max: or_never("v_accel_max"),
+                        w_accel_max: or_never("w_accel_max"),
+                    })
+                }
+                "velocity_saturation" => {
+                    e.velocity_saturation = Some(VelocitySaturation {
+                        v_max: or_never("v_max"),
+                        w_max: or_never("w_max"),
+                    })
+                }
+                "coulomb_friction" => {
+                    e.coulomb_friction = Some(CoulombFriction {
+                        v_coulomb: p.get("v_coulomb").copied().unwrap_or(0.0),
+                        w_coulomb: p.get("w_coulomb").copied().unwrap_or(0.0),
+                    })
+                }
+                "wheel_asymmetry" => {
+                    e.wheel_asymmetry = Some(WheelAsymmetry {
+                        ratio: get("ratio")?,
+                    })
+                }
+                "payload_change" => {
+                    let mut after = *theta;
+                    for (i, k) in [
+                        (0, "theta1_after"),
+                        (1, "theta2_after"),
+                        (2, "theta3_after"),
+                        (4, "theta5_after"),
+                    ] {
+                        after[i] = get(k)?;
+                    }
+                    e.payload_change = Some(PayloadChange {
+                        time_s: get("time_s")?,
+                        theta_after: after,
+                    })
+                }
+                "gain_drift" => {
+                    e.gain_drift = Some(GainDrift {
+                        rate_per_s: get("rate_per_s")?,
+                    })
+                }
+                "slip" => {
+                    e.slip = Some(Slip {
+                        k_v: p.get("k_v").copied().unwrap_or(0.0),
+                        k_w: p.get("k_w").copied().unwrap_or(0.0),
+                    })
+                }
+                other => {
+                    return Err(Error::InvalidSetting(format!(
+                        "effect {other}: the simulator has no such effect"
+                    )));
+                }
+            }
+        }
+        e.validate()?;
+        Ok(e)
+    }
+
     /// The names of the effects that are on, in the order of the fields.
     pub fn active(&self) -> Vec<&'static str> {
         let mut names = Vec::new();

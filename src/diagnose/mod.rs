@@ -156,7 +156,8 @@ pub struct Channels {
 pub struct Stage {
     /// `nominal`, or the candidates added (`nominal + input_delay + …`).
     pub model: String,
-    /// θ: θ1…θ6, then the candidates' parameters.
+    /// θ: θ1…θ6, then the candidates' parameters (those held at their null — a limit's idle
+    /// channel — left out; `names` says which are here).
     pub theta: Vec<f64>,
     /// Standard errors of θ (output error, sandwich).
     pub std_err: Vec<f64>,

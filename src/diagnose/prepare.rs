@@ -142,17 +142,37 @@ impl Data {
     pub(super) fn stage(&self, cur: &Current) -> Stage {
         let (channels, validation_cost) = self.validate(&cur.sim);
         let model = self.model(&cur.candidates);
+        // Held parameters (a limit's idle channel at "never binds") are not reported.
+        let shown: Vec<usize> = (0..cur.theta.len())
+            .filter(|i| !cur.pinned.contains(i) || self.scanned(cur, *i))
+            .collect();
         Stage {
             model: std::iter::once("nominal")
                 .chain(cur.candidates.iter().map(|c| c.name()))
                 .collect::<Vec<_>>()
                 .join(" + "),
-            theta: cur.theta.clone(),
-            std_err: cur.std_err.clone(),
-            names: model.params().iter().map(|p| p.name.to_owned()).collect(),
+            theta: shown.iter().map(|&i| cur.theta[i]).collect(),
+            std_err: shown.iter().map(|&i| cur.std_err[i]).collect(),
+            names: shown
+                .iter()
+                .map(|&i| model.params()[i].name.to_owned())
+                .collect(),
             channels,
             validation_cost,
         }
+    }
+
+    /// Whether parameter `i` of the model in hand is a change time (held in the fits, found by
+    /// its own scan).
+    fn scanned(&self, cur: &Current, i: usize) -> bool {
+        let mut at = 6;
+        for c in &cur.candidates {
+            if i == at && c.effect().search() == Search::ChangeTime {
+                return true;
+            }
+            at += c.params().len();
+        }
+        false
     }
 }
 
