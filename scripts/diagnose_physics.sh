@@ -1,0 +1,28 @@
+#!/usr/bin/env bash
+# Issue 15's measuring instrument: `wheelid diagnose` on the independent rigid-body backend
+# (wheelid_robots::physics), built in release and run with the arguments passed through to
+# examples/diagnose_physics.rs (its module docs and --help list them). Prints a markdown report
+# (confusion matrix true effect × named effect, share exactly right overall / per profile / per
+# convention, false alarms on clean runs with a 95 % Clopper-Pearson interval, magnitude
+# errors, times); --json FILE writes one record per run.
+#
+# Seed split (documented; keep it): freeze the method on the TUNING seeds, then report on seeds
+# never looked at while tuning.
+#   TUNING                 seeds    1-20    look at these while tuning:  --seeds 1..20
+#   HOLD-OUT               seeds 1001-1100  report only:                 --seeds 1001..1100
+#   CLEAN FALSE ALARMS     seeds 2001-2100  report only, --cases clean:  --seeds 2001..2100
+# (--seeds A..B includes both ends.)
+#
+# Examples:
+#   scripts/diagnose_physics.sh --seeds 1..3 --profiles khepera3 --conventions window_end \
+#     --cases all --threads 1
+#   scripts/diagnose_physics.sh --seeds 2001..2100 --cases clean --threads 2 --json clean.jsonl
+#
+# Cost: a run is one physics simulation (~3-7 s for 60 s of the Khepera-like robot or 120 s of
+# the Pioneer-like one) plus the diagnosis (mostly < 1 s); a clean twin per seed is simulated
+# once more to measure how visible each effect is. `--cases all` is 1 clean + 10 single + 45
+# pair runs per (profile, convention, seed).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+cargo build --release --locked --example diagnose_physics >&2
+exec target/release/examples/diagnose_physics "$@"
