@@ -19,9 +19,11 @@
 //! θ1, θ2, θ3, θ5 replaced from a time on            Terms::payload
 //! ```
 //!
-//! An effect whose physics fits these stages is one file and one line in the registry
-//! (`wheelid_models::effects::EFFECTS`); an effect that needs a new stage adds it here and in
-//! the integrator.
+//! plus any state-dependent generalised [`Force`] an effect adds to the right-hand sides
+//! ([`Effect::force`], e.g. dry friction per wheel, sign(v ± dω/2)). An effect whose physics fits
+//! these stages or is a force is one file and one line in the registry
+//! (`wheelid_models::effects::EFFECTS`); an effect that needs a new stage (a command transform,
+//! a time-varying θ) adds it here and in the integrator.
 
 use crate::{ParamInfo, Recording, Result};
 
@@ -45,6 +47,16 @@ pub struct Terms {
     pub drift: f64,
     /// Losses per unit v·|ω| [s/rad] and |v|·ω [s/m].
     pub slip: [f64; 2],
+}
+
+/// A generalised force an effect adds to eq. 2.19's right-hand sides, θ1 v̇ = … + f_v and
+/// θ2 ω̇ = … + f_ω, in command units (m/s, rad/s), with its Jacobian ∂(f_v, f_ω)/∂(v, ω).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Force {
+    /// (f_v [m/s], f_ω [rad/s]).
+    pub f: [f64; 2],
+    /// ∂f/∂(v, ω): rows f_v, f_ω; columns v, ω.
+    pub jacobian: [[f64; 2]; 2],
 }
 
 /// The channels an effect acts on.
@@ -265,9 +277,20 @@ pub trait Effect: Send + Sync + std::fmt::Debug {
     fn plausible_together(&self, _fit: &FitData<'_>) -> std::result::Result<(), String> {
         Ok(())
     }
-    /// Fills its stage of the extended dynamics from its parameters `p`.
+    /// Fills its stage of the extended dynamics from its parameters `p` (an effect that acts
+    /// only through [`Effect::force`] leaves `terms` as they are).
     ///
     /// # Errors
     /// [`crate::Error::InvalidSetting`] for values the dynamics cannot use.
     fn apply(&self, p: &[f64], terms: &mut Terms) -> Result<()>;
+    /// Whether it adds a [`Force`] (then [`Effect::force`] is called at every evaluation of the
+    /// right-hand side).
+    fn has_force(&self) -> bool {
+        false
+    }
+    /// The force it adds at state (v [m/s], ω [rad/s]) with parameters `p` on a robot of wheel
+    /// track `track` [m] (independent of θ); the default adds none.
+    fn force(&self, _p: &[f64], _v: f64, _w: f64, _track: f64) -> Force {
+        Force::default()
+    }
 }

@@ -89,7 +89,7 @@ impl Extended {
         &self.candidates
     }
 
-    fn physics(&self, theta: &[f64]) -> Result<([f64; 6], Terms)> {
+    fn physics(&self, theta: &[f64]) -> Result<([f64; 6], Terms, Forces)> {
         if theta.len() != self.params.len() || theta.iter().any(|x| !x.is_finite()) {
             return Err(Error::InvalidSetting(format!(
                 "θ of the extended model has {} finite values, got {theta:?}",
@@ -108,13 +108,18 @@ impl Extended {
             }
         }
         let mut ph = Terms::default();
+        let mut forces = Forces::new();
         let mut i = 6;
         for c in &self.candidates {
             let n = c.params().len();
-            c.effect().apply(&theta[i..i + n], &mut ph)?;
+            let p = &theta[i..i + n];
+            c.effect().apply(p, &mut ph)?;
+            if c.effect().has_force() {
+                forces.push((c.effect(), p.to_vec()));
+            }
             i += n;
         }
-        Ok((th, ph))
+        Ok((th, ph, forces))
     }
 }
 
@@ -174,8 +179,8 @@ impl DynamicModel for Extended {
         &regressor::CHANNELS
     }
     fn simulate(&self, theta: &[f64], rec: &Recording, initial: &[f64]) -> Result<Simulation> {
-        let (th0, ph) = self.physics(theta)?;
-        let y = self.integrate::<2, 0>(&th0, &ph, rec, initial)?;
+        let (th0, ph, forces) = self.physics(theta)?;
+        let y = self.integrate::<2, 0>(&th0, &ph, &forces, rec, initial)?;
         Ok(y.to_vec())
     }
 
@@ -190,9 +195,16 @@ impl DynamicModel for Extended {
     }
 }
 
+/// The effects that add a [`wheelid_core::Force`], with their parameters.
+type Forces = Vec<(&'static dyn wheelid_core::Effect, Vec<f64>)>;
+
 /// The right-hand side of the module doc's dynamics (friction and slip as fitted), with the
 /// sensitivity equations when `M` = [`NS`].
 struct Field {
+    /// Effects that add a force, with their parameters.
+    forces: Forces,
+    /// Wheel track [m] given to the forces.
+    track: f64,
     coulomb: [f64; 2],
     /// Whether dry friction is present (its tanh dominates the cost of a step).
     dry: bool,
@@ -225,15 +237,25 @@ impl Field {
             dry_v = self.coulomb[0] * (1.0 - tv * tv) / FRICTION_EPS[0];
             dry_w = self.coulomb[1] * (1.0 - tw * tw) / FRICTION_EPS[1];
         }
+        let mut jf = [[0.0; 2]; 2];
+        for (e, p) in &self.forces {
+            let force = e.force(p, v, w, self.track);
+            fv += force.f[0];
+            fw += force.f[1];
+            for (row, d) in jf.iter_mut().zip(force.jacobian) {
+                row[0] += d[0];
+                row[1] += d[1];
+            }
+        }
         let mut out = [0.0; N];
         out[0] = fv * inv[0];
         out[1] = fw * inv[1];
         if M == NS {
             let sign = |x: f64| if x == 0.0 { 0.0 } else { x.signum() };
-            let a00 = (-th[3] * (1.0 + kv * w.abs()) - dry_v) * inv[0];
-            let a01 = (2.0 * th[2] * w - th[3] * kv * v * sign(w)) * inv[0];
-            let a10 = (-th[4] * w - th[5] * kw * sign(v) * w) * inv[1];
-            let a11 = (-th[4] * v - th[5] * (1.0 + kw * v.abs()) - dry_w) * inv[1];
+            let a00 = (-th[3] * (1.0 + kv * w.abs()) - dry_v + jf[0][0]) * inv[0];
+            let a01 = (2.0 * th[2] * w - th[3] * kv * v * sign(w) + jf[0][1]) * inv[0];
+            let a10 = (-th[4] * w - th[5] * kw * sign(v) * w + jf[1][0]) * inv[1];
+            let a11 = (-th[4] * v - th[5] * (1.0 + kw * v.abs()) - dry_w + jf[1][1]) * inv[1];
             for a in 0..M {
                 let (sv, sw) = (z[2 + a], z[2 + M + a]);
                 out[2 + a] = a00 * sv + a01 * sw;
@@ -328,7 +350,7 @@ impl Extended {
         initial: &[f64],
         columns: &[usize],
     ) -> Result<(Simulation, Sensitivities)> {
-        let (th0, ph) = self.physics(theta)?;
+        let (th0, ph, forces) = self.physics(theta)?;
         if let Some(&j) = columns.iter().find(|&&j| j >= self.params.len()) {
             return Err(Error::InvalidSetting(format!(
                 "sensitivity column {j} of {} parameters",
@@ -345,12 +367,12 @@ impl Extended {
                     scope.spawn(move || {
                         let mut th = theta.to_vec();
                         th[j] += step(j);
-                        let (t, p) = self.physics(&th)?;
-                        self.integrate::<2, 0>(&t, &p, rec, initial)
+                        let (t, p, f) = self.physics(&th)?;
+                        self.integrate::<2, 0>(&t, &p, &f, rec, initial)
                     })
                 })
                 .collect();
-            let z = self.integrate::<NZ, NS>(&th0, &ph, rec, initial);
+            let z = self.integrate::<NZ, NS>(&th0, &ph, &forces, rec, initial);
             let fd: Vec<Result<[Vec<f64>; 2]>> = handles
                 .into_iter()
                 .map(|h| {
@@ -411,6 +433,7 @@ impl Extended {
         &self,
         th0: &[f64; 6],
         ph: &Terms,
+        forces: &Forces,
         rec: &Recording,
         initial: &[f64],
     ) -> Result<[Vec<f64>; N]> {
@@ -514,6 +537,8 @@ impl Extended {
         };
         let (before, after) = (prepare(*th0, false), th_after.map(|a| prepare(a, true)));
         let field = Field {
+            forces: forces.clone(),
+            track: self.track,
             coulomb: ph.coulomb,
             dry,
             slip: ph.slip,
@@ -705,6 +730,11 @@ mod tests {
             ),
             (vec![Candidate::GAIN_DRIFT], vec![0.01]),
             (vec![Candidate::SLIP], vec![0.05, 0.1]),
+            (vec![Candidate::WHEEL_FRICTION], vec![0.03]),
+            (
+                vec![Candidate::COULOMB_FRICTION, Candidate::WHEEL_FRICTION],
+                vec![0.02, 0.05, 0.03],
+            ),
             (
                 vec![
                     Candidate::INPUT_DELAY,

@@ -11,6 +11,7 @@ mod payload_change;
 mod slip;
 mod velocity_saturation;
 mod wheel_asymmetry;
+mod wheel_friction;
 
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 use wheelid_core::{Effect, ParamInfo};
@@ -23,9 +24,10 @@ pub use payload_change::PayloadChange;
 pub use slip::Slip;
 pub use velocity_saturation::VelocitySaturation;
 pub use wheel_asymmetry::WheelAsymmetry;
+pub use wheel_friction::WheelFriction;
 
 /// The registry: every built-in effect, in the order the diagnosis reports them.
-pub static EFFECTS: [&dyn Effect; 8] = [
+pub static EFFECTS: [&dyn Effect; 9] = [
     &InputDelay,
     &AccelerationLimit,
     &VelocitySaturation,
@@ -34,6 +36,7 @@ pub static EFFECTS: [&dyn Effect; 8] = [
     &PayloadChange,
     &GainDrift,
     &Slip,
+    &WheelFriction,
 ];
 
 /// A value far beyond any command: a limit at this level never binds (a limit's null).
@@ -89,6 +92,8 @@ impl Candidate {
     pub const GAIN_DRIFT: Candidate = Candidate(&GainDrift);
     /// Losses growing with v·|ω| ([`Slip`]).
     pub const SLIP: Candidate = Candidate(&Slip);
+    /// Dry friction per wheel ([`WheelFriction`]).
+    pub const WHEEL_FRICTION: Candidate = Candidate(&WheelFriction);
 
     /// A candidate for any effect (a built-in one of [`EFFECTS`] or the caller's own).
     pub fn new(effect: &'static dyn Effect) -> Self {
