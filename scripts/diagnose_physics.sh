@@ -25,4 +25,4 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 cargo build --release --locked --example diagnose_physics >&2
-exec target/release/examples/diagnose_physics "$@"
+exec "${CARGO_TARGET_DIR:-target}/release/examples/diagnose_physics" "$@"
