@@ -492,8 +492,9 @@ pub fn draw_effects(
 /// Magnitude comparisons for every true effect of a run: latency vs `delay_s`; rate limits vs
 /// `v_accel_max`, `w_accel_max` (a channel held at its null, ≥ 10⁵, is skipped); the right
 /// amplifier's gain or tyre factor vs `ratio` (error of the deviation from 1); dry friction vs
-/// `v_coulomb`, `w_coulomb` (the map's θ4, θ6 × the closed-form steady loss,
-/// [`friction_loss_per_nm`]); payload time vs `time_s` and the loaded map's θ1 vs
+/// `v_coulomb`, `w_coulomb` and `wheel_friction`'s `c_wheel` (the map's θ4, θ6 × the
+/// closed-form steady loss, [`friction_loss_per_nm`]; `coulomb_friction` acts on v and ω, not
+/// per wheel, so its values are a looser match); payload time vs `time_s` and the loaded map's θ1 vs
 /// `theta1_after`. Everything else is `n/a`.
 pub fn magnitudes(
     p: &PhysicalProfile,
@@ -560,6 +561,12 @@ pub fn magnitudes(
                     "θ6·Δω vs w_coulomb",
                     th[5] * g("steady_loss_w"),
                     est("w_coulomb"),
+                    false,
+                );
+                push(
+                    "θ4·Δv vs c_wheel",
+                    th[3] * g("steady_loss_v"),
+                    est("c_wheel"),
                     false,
                 );
             }
