@@ -24,6 +24,26 @@ pub(super) fn check_candidate(
     c.effect().plausible_together(&fit)
 }
 
+/// Why a fitted candidate is turned down.
+pub(super) struct Refusal {
+    /// For the report.
+    pub(super) reason: String,
+    /// When its fingerprint stays (and its parameters are steps along it): θ moved by one more
+    /// Gauss–Newton step along the pattern, and the held parameters — where a continued fit
+    /// starts (a nominal fit distorted by a strong effect linearises it poorly: the first fit
+    /// stops short).
+    pub(super) continue_from: Option<(Vec<f64>, Vec<usize>)>,
+}
+
+impl From<String> for Refusal {
+    fn from(reason: String) -> Self {
+        Self {
+            reason,
+            continue_from: None,
+        }
+    }
+}
+
 /// What a verdict is judged against: the model before, the round's nominees, the Jacobian
 /// and its basis, the settings.
 pub(super) struct Context<'a> {
@@ -44,12 +64,13 @@ pub(super) struct Context<'a> {
 /// its validation fits and the relative drop of the validation cost.
 ///
 /// # Errors
-/// The reason it is turned down, for the report.
+/// The reason it is turned down, for the report; when its fingerprint stays, where a fit
+/// continued along it would start.
 pub(super) fn verdict(
     cx: &Context<'_>,
     i: usize,
     new: Current,
-) -> std::result::Result<(Current, Channels, f64), String> {
+) -> std::result::Result<(Current, Channels, f64), Refusal> {
     let (data, settings) = (cx.data, cx.settings);
     let n = &cx.nominees[i];
     let c = n.pattern.candidate;
@@ -57,11 +78,11 @@ pub(super) fn verdict(
     let (after, cost) = data.validate(&new.sim);
     let drop = 1.0 - cost / cost_before;
     if drop < settings.min_improvement {
-        return Err(format!(
+        return Err(Refusal::from(format!(
             "the validation cost drops by {:.1} % only (< {:.0} %)",
             100.0 * drop,
             100.0 * settings.min_improvement
-        ));
+        )));
     }
     for (name, b, a) in [
         ("v", before.v.fit_percent, after.v.fit_percent),
@@ -69,12 +90,12 @@ pub(super) fn verdict(
     ] {
         // A channel constant over the validation blocks has no fit % (NaN).
         if b.is_finite() && (a.is_nan() || a < b - 1.0) {
-            return Err(format!(
+            return Err(Refusal::from(format!(
                 "{name}'s validation fit falls from {b:.1} % to {a:.1} %"
-            ));
+            )));
         }
     }
-    check_candidate(data, &new, c)?;
+    check_candidate(data, &new, c).map_err(Refusal::from)?;
     let frame = data.frame();
     let e_new = frame.residuals(&new.sim);
     let others: Vec<&DMatrix<f64>> = cx
@@ -97,11 +118,61 @@ pub(super) fn verdict(
     if let Some(s) = score::score(&frame, &q_net, &n.pattern.s, &e_new, data.hac_lags())
         && s.p_value * (n.pattern.grid as f64) < settings.alpha
         && s.stat > FINGERPRINT_LEFT * n.score.stat
+        && !small_effect_left(c, &new, &n.pattern, &s.beta, data)
     {
-        return Err(format!(
-            "its fingerprint stays (χ²({}) = {:.1} of {:.1}, p = {:.1e})",
-            s.dof, s.stat, n.score.stat, s.p_value
-        ));
+        let base = new.theta.len() - c.params().len();
+        let mut moved = new.theta.clone();
+        for (&j, b) in n.pattern.param_of_col.iter().zip(&s.beta) {
+            if !new.pinned.contains(&(base + j)) {
+                moved[base + j] += b;
+            }
+        }
+        return Err(Refusal {
+            reason: format!(
+                "its fingerprint stays (χ²({}) = {:.1} of {:.1}, p = {:.1e}; validation cost \
+                 −{:.1} %, fit v {:.1} %, ω {:.1} %)",
+                s.dof,
+                s.stat,
+                n.score.stat,
+                s.p_value,
+                100.0 * drop,
+                after.v.fit_percent,
+                after.w.fit_percent
+            ),
+            continue_from: (!matches!(c.effect().search(), Search::Limit { .. }))
+                .then_some((moved, new.pinned.clone())),
+        });
     }
     Ok((new, after, drop))
 }
+
+/// Effect size of what a fingerprint leaves (issue 15: a test statistic keeps its size on a
+/// long, quiet recording even when the fit is near perfect): a candidate whose parameters are
+/// steps along its pattern's columns (gradient probes: not a limit's level probe) leaves a small
+/// effect when one more Gauss–Newton step along the pattern, `beta_left` (in the parameters'
+/// units), would move each fitted parameter by at most [`EFFECT_LEFT`] of its distance from
+/// the null.
+fn small_effect_left(
+    c: Candidate,
+    new: &Current,
+    pattern: &Pattern,
+    beta_left: &[f64],
+    data: &Data,
+) -> bool {
+    if matches!(c.effect().search(), Search::Limit { .. }) {
+        return false;
+    }
+    let base = new.theta.len() - c.params().len();
+    let (t_lo, t_hi) = data.span();
+    let null = c.effect().null(&new.theta[..6], 0.5 * (t_lo + t_hi));
+    pattern
+        .param_of_col
+        .iter()
+        .zip(beta_left)
+        .filter(|(j, _)| !new.pinned.contains(&(base + **j)))
+        .all(|(&j, b)| b.abs() <= EFFECT_LEFT * (new.theta[base + j] - null[j]).abs())
+}
+
+/// Largest step a fingerprint may still ask of a fitted parameter, as a share of its distance
+/// from the null, for the fingerprint to count as gone ([`small_effect_left`]).
+const EFFECT_LEFT: f64 = 0.2;

@@ -63,6 +63,14 @@ pub(super) fn start_candidate(
     if matches!(search, Search::Smooth | Search::ChangeTime) {
         shorten_step(&mut theta, cur, nominee, base, &training_cost);
     }
+    // A force linear in its one parameter enters the regression as one more column: θ1…θ6 and
+    // the parameter by least squares together, the better start kept (a strong effect
+    // distorts the nominal θ far from where the fit of the extended model can reach).
+    if let Some(joint) = joint_regression(data, c, base, &theta)
+        && training_cost(&joint) < training_cost(&theta)
+    {
+        theta = joint;
+    }
     // A limit's probe level is a rough reading of the data: scaled on a grid first.
     if matches!(search, Search::Limit { .. }) {
         let active: Vec<usize> = (0..2)
@@ -130,6 +138,43 @@ fn shorten_step(
     for j in 0..null.len() {
         theta[base + j] = null[j] + best.1 * step[j];
     }
+}
+
+/// θ1…θ6 and the parameter of a force effect linear in its one parameter
+/// ([`wheelid_core::Effect::force`] at p = 1 as a regressor column), by weighted least squares
+/// on the training samples with the measured accelerations:
+/// u_v = θ1 v̇ − θ3 ω² + θ4 v − c φ_v, u_ω = θ2 ω̇ + θ5 v ω + θ6 ω − c φ_ω.
+/// `None` for other effects, another candidate already in the model, or an unphysical answer.
+fn joint_regression(data: &Data, c: Candidate, base: usize, theta: &[f64]) -> Option<Vec<f64>> {
+    let e = c.effect();
+    if !e.has_force() || c.params().len() != 1 || base != 6 {
+        return None;
+    }
+    let d = data.track?;
+    let mut rows: Vec<[f64; 7]> = Vec::new();
+    let mut ys = Vec::new();
+    for (r, rec) in data.recs.iter().enumerate() {
+        for k in (0..rec.len()).filter(|&k| data.train[r][k]) {
+            let (v, w) = (rec.v[k], rec.w[k]);
+            let phi = e.force(&[1.0], v, w, d).f;
+            let [wv, ww] = data.weight;
+            let [av, aw] = [data.accel[r][0][k], data.accel[r][1][k]];
+            rows.push([av * wv, 0.0, -w * w * wv, v * wv, 0.0, 0.0, -phi[0] * wv]);
+            ys.push(rec.v_ref[k] * wv);
+            rows.push([0.0, aw * ww, 0.0, 0.0, v * w * ww, w * ww, -phi[1] * ww]);
+            ys.push(rec.w_ref[k] * ww);
+        }
+    }
+    let x = DMatrix::from_fn(rows.len(), 7, |i, j| rows[i][j]);
+    let y = nalgebra::DVector::from_vec(ys);
+    let sol = x.svd(true, true).solve(&y, 1e-12).ok()?;
+    let physical = [0, 1, 3, 5].iter().all(|&i| sol[i] > 0.0) && sol[6] >= 0.0;
+    physical.then(|| {
+        let mut th = theta.to_vec();
+        th[..6].copy_from_slice(&sol.as_slice()[..6]);
+        th[base] = sol[6];
+        th
+    })
 }
 
 /// A dead time (θ[base]) by `cost` on the guess and a geometric grid from half a sample `dt`

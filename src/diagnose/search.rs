@@ -192,10 +192,8 @@ fn first_accepted(
     for (i, st) in ready {
         let c = round.nominees[i].pattern.candidate;
         progress.step(&format!("fitting {}", c.name()), 1);
-        match fit_candidate(data, cur, &round.nominees[i], st)
-            .and_then(|(new, _)| verdict(&context, i, new))
-        {
-            Ok((new, after, drop)) => return Some((i, new, after, drop)),
+        match fit_and_judge(&context, i, st) {
+            Ok(x) => return Some(x),
             Err(reason) => rejected.push(Rejected {
                 effect: c.name().into(),
                 reason,
@@ -203,6 +201,44 @@ fn first_accepted(
         }
     }
     None
+}
+
+/// Most fits continued along a fingerprint that stays ([`Refusal::continue_from`]).
+const CONTINUATIONS: usize = 2;
+
+/// Fits nominee `i` from `start` and judges it ([`verdict`]); where its fingerprint stays, the
+/// fit is continued from one more step along it, at most [`CONTINUATIONS`] times.
+fn fit_and_judge(
+    cx: &Context<'_>,
+    i: usize,
+    mut start: Start,
+) -> std::result::Result<(usize, Current, Channels, f64), String> {
+    let n = &cx.nominees[i];
+    for attempt in 0..=CONTINUATIONS {
+        let bounds = start.bounds.clone();
+        let (new, _) = fit_candidate(cx.data, cx.cur, n, start)?;
+        match verdict(cx, i, new) {
+            Ok((new, after, drop)) => return Ok((i, new, after, drop)),
+            Err(Refusal {
+                continue_from: Some((theta, pinned)),
+                ..
+            }) if attempt < CONTINUATIONS => {
+                let clamped = theta
+                    .iter()
+                    .zip(&bounds)
+                    .map(|(x, (lo, hi))| x.clamp(*lo, *hi))
+                    .collect();
+                start = Start {
+                    theta: clamped,
+                    bounds,
+                    pinned,
+                    cost: f64::NAN,
+                };
+            }
+            Err(r) => return Err(r.reason),
+        }
+    }
+    Err("no fit".into())
 }
 
 /// The finding for nominee `n` accepted into `new` (its parameters as fitted; the final

@@ -133,6 +133,7 @@ pub fn simulate_physics_recording(
     rec.y = Some(y);
     rec.phi = Some(phi);
     rec.set_meta("robot", profile.name.clone());
+    rec.set_meta("track", format!("{} m", profile.d));
     rec.set_meta(
         "source",
         format!("wheelid physics backend (rapier3d-f64), seed {}", s.seed),

@@ -1,0 +1,89 @@
+//! Diagnosis on physics the candidates did not write (issue 15): effects realised where they act
+//! on the rigid-body robot (`wheelid_robots::physics`), named and measured by `diagnose`.
+//!
+//! Seeds: the method was built looking at seeds 1–3, 101–103 and 201–203 (seed 103 showed the
+//! "fingerprint stays" rule failing a near-perfect fit — now an effect-size rule in
+//! `diagnose::accept`; seed 201 a strong friction whose fit stopped short — now a continued fit
+//! and a joint regression start in `diagnose::screen`); these tests run seeds 301–303, first
+//! run after those changes and not tuned on.
+
+use wheelid::config::ExcitationConfig;
+use wheelid::diagnose::{DiagnoseSettings, Diagnosis, diagnose};
+use wheelid::robots::physics::{
+    Controller, PhysicalProfile, PhysicsSettings, simulate_physics_recording,
+};
+
+/// 60 s of `p` under a random multisine (seeded), with `effects` applied by `tweak`, diagnosed
+/// with the model its controller implies.
+fn diagnosed(p: &PhysicalProfile, seed: u64, tweak: impl Fn(&mut PhysicsSettings)) -> Diagnosis {
+    let mut s = PhysicsSettings {
+        duration_s: 60.0,
+        seed,
+        ..PhysicsSettings::default()
+    };
+    tweak(&mut s);
+    let th = p.theta();
+    let f_max =
+        (1.5 / (2.0 * std::f64::consts::PI * th[0].max(th[1]))).clamp(0.2, 0.2 / p.period_s);
+    let e = ExcitationConfig::RandomMultisine {
+        seed,
+        v_offset: 0.1 * p.v_max,
+        v_amp: 0.3 * p.v_max,
+        w_amp: 0.35 * p.w_max,
+        f_max_hz: f_max,
+    };
+    let rec = simulate_physics_recording(p, &e.build().expect("excitation"), &s).expect("runs");
+    let model = wheelid::models::by_name(p.model_name()).expect("model");
+    diagnose(&[rec], model.as_ref(), &DiagnoseSettings::default()).expect("diagnoses")
+}
+
+/// A dry friction torque F in each wheel joint of a wheel-PD robot is, in steady state, a
+/// setpoint offset of c = F R_a r / (k_a k_P) in wheel rim speed (the PD's proportional
+/// voltage must cover the friction's R_a F / k_a).
+fn c_wheel(p: &PhysicalProfile, f: f64) -> f64 {
+    let Controller::WheelPd { k_p, .. } = p.controller else {
+        panic!("a wheel-PD profile");
+    };
+    f * p.r_a * p.r / (p.k_a * k_p)
+}
+
+/// Dry friction in the wheel joints of the Khepera-like robot, 4–10 % of its top speed in
+/// setpoint terms, is named `wheel_friction` — per wheel, against each wheel's own direction —
+/// and nothing else, with c within 20 % of the closed form, and the clean runs of the same
+/// seeds name nothing. (The Burger-like robot is not asserted yet: on tuning seed 201 a friction
+/// of 9.8 % of its top speed was named `input_delay`; see the issue 15 note.)
+#[test]
+fn dry_friction_in_the_wheel_joints_is_named_wheel_friction() {
+    for p in [PhysicalProfile::khepera3()] {
+        for seed in 301..=303u64 {
+            // A torque whose offset is 4–10 % of the top speed, drawn from the seed.
+            let frac = 0.04 + 0.06 * ((seed * 2_654_435_761) % 1000) as f64 / 1000.0;
+            let f = frac * p.v_max / c_wheel(&p, 1.0);
+            let want = c_wheel(&p, f);
+            let d = diagnosed(&p, seed, |s| s.effects.dry_friction_nm = Some(f));
+            let named: Vec<&str> = d.findings.iter().map(|x| x.effect.as_str()).collect();
+            let c = d
+                .findings
+                .iter()
+                .find(|x| x.effect == "wheel_friction")
+                .and_then(|x| x.parameters.get("c_wheel").copied());
+            println!(
+                "{} seed {seed}: F = {f:.5} N·m, c = {c:?} (closed form {want:.5}), named {named:?}",
+                p.name
+            );
+            if named != ["wheel_friction"] {
+                print!("{}", wheelid::report::diagnosis_text(&d));
+            }
+            assert_eq!(named, ["wheel_friction"], "{} seed {seed}", p.name);
+            let c = c.expect("c_wheel");
+            assert!((c / want - 1.0).abs() < 0.2, "c = {c}, closed form {want}");
+            let clean = diagnosed(&p, seed, |_| {});
+            assert!(
+                clean.findings.is_empty() && clean.unexplained.is_none(),
+                "{} seed {seed} clean: {:?}",
+                p.name,
+                clean.findings
+            );
+        }
+    }
+}
