@@ -190,20 +190,11 @@ fn run_simulate_physics(a: &SimulateArgs, cfg: &SimulateConfig) -> Result<()> {
     if let Some(j) = a.jitter {
         s.jitter = j;
     }
-    let th = profile.theta();
-    let f_max =
-        (1.5 / (2.0 * std::f64::consts::PI * th[0].max(th[1]))).clamp(0.2, 0.2 / profile.period_s);
     let excitation = match (a.excitation.as_deref(), &cfg.excitation) {
-        (None, Some(e)) => e.clone(),
-        _ => ExcitationConfig::RandomMultisine {
-            seed: s.seed,
-            v_offset: 0.1 * profile.v_max,
-            v_amp: 0.3 * profile.v_max,
-            w_amp: 0.35 * profile.w_max,
-            f_max_hz: f_max,
-        },
+        (None, Some(e)) => e.build()?,
+        _ => profile.random_multisine(s.seed)?,
     };
-    let rec = simulate_physics_recording(&profile, &excitation.build()?, &s)?;
+    let rec = simulate_physics_recording(&profile, &excitation, &s)?;
     write_recording(&rec, &a.out)?;
     println!(
         "{} samples ({:.1} s of the physics {} at {} s, timing {}) written to {}",

@@ -7,7 +7,6 @@
 //! and a joint regression start in `diagnose::screen`); these tests run seeds 301–303, first
 //! run after those changes and not tuned on.
 
-use wheelid::config::ExcitationConfig;
 use wheelid::diagnose::{DiagnoseSettings, Diagnosis, diagnose};
 use wheelid::robots::physics::{
     Controller, PhysicalProfile, PhysicsSettings, simulate_physics_recording,
@@ -22,17 +21,8 @@ fn diagnosed(p: &PhysicalProfile, seed: u64, tweak: impl Fn(&mut PhysicsSettings
         ..PhysicsSettings::default()
     };
     tweak(&mut s);
-    let th = p.theta();
-    let f_max =
-        (1.5 / (2.0 * std::f64::consts::PI * th[0].max(th[1]))).clamp(0.2, 0.2 / p.period_s);
-    let e = ExcitationConfig::RandomMultisine {
-        seed,
-        v_offset: 0.1 * p.v_max,
-        v_amp: 0.3 * p.v_max,
-        w_amp: 0.35 * p.w_max,
-        f_max_hz: f_max,
-    };
-    let rec = simulate_physics_recording(p, &e.build().expect("excitation"), &s).expect("runs");
+    let e = p.random_multisine(seed).expect("excitation");
+    let rec = simulate_physics_recording(p, &e, &s).expect("runs");
     let model = wheelid::models::by_name(p.model_name()).expect("model");
     diagnose(&[rec], model.as_ref(), &DiagnoseSettings::default()).expect("diagnoses")
 }

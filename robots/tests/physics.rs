@@ -186,11 +186,7 @@ fn steady_turns_settle_where_the_maps_theta_says() {
 
 /// A random multisine up to about 1.5× the robot's bandwidth, inside its speed limits.
 fn excitation(p: &PhysicalProfile, seed: u64) -> Excitation {
-    let th = p.theta();
-    let f_bw = 1.0 / (2.0 * std::f64::consts::PI * th[0].max(th[1]));
-    let f_max = (1.5 * f_bw).clamp(0.2, 0.2 / p.period_s);
-    Excitation::random_multisine(seed, 0.1 * p.v_max, 0.3 * p.v_max, 0.35 * p.w_max, f_max)
-        .expect("excitation")
+    p.random_multisine(seed).expect("excitation")
 }
 
 /// θ by output error on the profile's own model, started 10 % off the map's θ.

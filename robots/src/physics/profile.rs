@@ -228,6 +228,28 @@ impl PhysicalProfile {
         }
     }
 
+    /// The identification excitation used on this robot throughout wheelid (the CLI's default,
+    /// the accuracy and diagnosis tests): random-phase multisines ([`Excitation::random_multisine`],
+    /// phases from `seed`) up to 1.5× the robot's bandwidth 1/(2π max(θ1, θ2)) (clamped to
+    /// [0.2 Hz, a fifth of the sample rate]), v_ref = 0.1 v_max ± 0.3 v_max, ω_ref = ±0.35 ω_max.
+    ///
+    /// # Errors
+    /// As [`Excitation::random_multisine`].
+    ///
+    /// [`Excitation::random_multisine`]: crate::excitation::Excitation::random_multisine
+    pub fn random_multisine(&self, seed: u64) -> Result<crate::excitation::Excitation> {
+        let th = self.theta();
+        let f_bw = 1.0 / (2.0 * std::f64::consts::PI * th[0].max(th[1]));
+        let f_max = (1.5 * f_bw).clamp(0.2, 0.2 / self.period_s);
+        crate::excitation::Excitation::random_multisine(
+            seed,
+            0.1 * self.v_max,
+            0.3 * self.v_max,
+            0.35 * self.w_max,
+            f_max,
+        )
+    }
+
     /// The model name whose parameterization this controller follows (`wheel-pd`, `vw-pd`).
     pub fn model_name(&self) -> &'static str {
         match self.controller {
