@@ -198,7 +198,8 @@ pub struct Record {
     pub mismatch: bool,
     /// Channels of the unexplained structure, if any.
     pub unexplained: Option<Vec<String>>,
-    /// Named set equals the truth through [`TRUTH`] ([`exactly_right`]).
+    /// Named set equals the truth through [`TRUTH`] ([`exactly_right`]); a clean run also
+    /// needs nothing unexplained.
     pub exactly_right: bool,
     /// Nominal model's validation fit.
     pub fit_nominal: Fits,
@@ -730,7 +731,9 @@ fn run_into(spec: &RunSpec, cache: &CleanRuns, rec: &mut Record) -> Result<()> {
         v: d.final_stage.channels.v.fit_percent,
         w: d.final_stage.channels.w.fit_percent,
     };
-    rec.exactly_right = exactly_right(&spec.effects, &rec.named);
+    // A clean run is right only with nothing named and nothing left unexplained.
+    rec.exactly_right = exactly_right(&spec.effects, &rec.named)
+        && (!spec.effects.is_empty() || rec.unexplained.is_none());
     rec.magnitudes = magnitudes(&p, &rec.truth_params, &rec.named_params);
     Ok(())
 }
@@ -1072,9 +1075,7 @@ pub fn report(recs: &[Record], wall_s: f64) -> String {
          named and nothing unexplained); failed runs count as wrong. 95 % Clopper–Pearson.\n"
     );
     let _ = writeln!(out, "| group | exactly right |\n| --- | --- |");
-    let right = |r: &Record| {
-        r.error.is_none() && r.exactly_right && (r.kind != "clean" || r.unexplained.is_none())
-    };
+    let right = |r: &Record| r.error.is_none() && r.exactly_right;
     let mut groups: Vec<(String, Vec<&Record>)> = vec![("all".into(), recs.iter().collect())];
     for kind in ["clean", "single", "pair"] {
         groups.push((
