@@ -35,7 +35,6 @@ use anyhow::{Context, Result, bail};
 use clap::Parser;
 use serde::Serialize;
 use statrs::distribution::{Beta, ContinuousCDF};
-use wheelid::config::ExcitationConfig;
 use wheelid::core::Timing;
 use wheelid::diagnose::{DiagnoseSettings, diagnose};
 use wheelid::robots::Excitation;
@@ -242,27 +241,13 @@ pub fn uniform(seed: u64, stream: u64, draw: u64) -> f64 {
     (h >> 11) as f64 / (1u64 << 53) as f64
 }
 
-/// The excitation of a run: a random multisine seeded by the seed, v_ref = 0.1 v_max ±
-/// 0.3 v_max, ω_ref = ±0.35 ω_max, lines up to 1.5× the robot's bandwidth (clamped to
-/// [0.2 Hz, 0.2/Δ]).
-///
-/// Known duplication: this rule is copied from `run_simulate_physics` in src/main.rs (and
-/// `robots/tests/physics.rs` has it too); keep them in step until it has one home.
+/// The excitation of a run: the physics excitation rule, [`PhysicalProfile::random_multisine`]
+/// seeded by the seed.
 ///
 /// # Errors
 /// Invalid multisine settings.
 pub fn excitation(p: &PhysicalProfile, seed: u64) -> Result<Excitation> {
-    let th = p.theta();
-    let f_max =
-        (1.5 / (2.0 * std::f64::consts::PI * th[0].max(th[1]))).clamp(0.2, 0.2 / p.period_s);
-    ExcitationConfig::RandomMultisine {
-        seed,
-        v_offset: 0.1 * p.v_max,
-        v_amp: 0.3 * p.v_max,
-        w_amp: 0.35 * p.w_max,
-        f_max_hz: f_max,
-    }
-    .build()
+    Ok(p.random_multisine(seed)?)
 }
 
 /// What the excitation demands of the clean robot, per host period, estimated from the map's
