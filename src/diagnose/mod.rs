@@ -49,7 +49,7 @@ mod screen;
 mod search;
 
 use accept::*;
-pub use assemble::LOW_FIT_PERCENT;
+pub use assemble::{LOW_FIT_PERCENT, PRACTICAL_FIT_PERCENT};
 use fingerprint::*;
 use fit::*;
 use prepare::*;

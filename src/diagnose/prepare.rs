@@ -259,9 +259,10 @@ pub(super) fn prepare(
     model: &dyn RegressorModel,
     settings: &DiagnoseSettings,
 ) -> Result<(Data, OutputErrorFit), DiagnoseError> {
+    // Window-middle stamps (c) rewritten to window ends (b), which the models simulate.
     let recs: Vec<Recording> = recordings
         .iter()
-        .map(|r| condition::make_uniform(r).map(|(u, _)| u))
+        .map(|r| condition::make_uniform(&condition::restamp(r)?).map(|(u, _)| u))
         .collect::<Result<_, _>>()?;
     let (train, valid) = split(&recs, settings.blocks)?;
     let dt = recs

@@ -351,7 +351,13 @@ pub(super) fn run(
         };
         if round_no == 0 {
             out.tests = family(&round);
-            out.mismatch = round.decisions.iter().any(|&d| d);
+            // Evidence counts as a mismatch only where the model misses a practically relevant
+            // share of a channel (a 99.9 % fit with structure at the 0.1 % level is kept).
+            let (fits, _) = data.validate(&cur.sim);
+            let relevant = [fits.v.fit_percent, fits.w.fit_percent]
+                .iter()
+                .any(|f| f.is_nan() || *f < PRACTICAL_FIT_PERCENT);
+            out.mismatch = round.decisions.iter().any(|&d| d) && relevant;
         }
         out.rounds.push(fingerprints(&round));
         if round_no == settings.max_effects || !out.mismatch {
