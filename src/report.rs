@@ -322,19 +322,26 @@ pub fn diagnosis_text(d: &Diagnosis) -> String {
         );
     }
     let tested = d.tests.iter().any(|t| t.significant);
+    let practical = [d.nominal.channels.v, d.nominal.channels.w]
+        .iter()
+        .all(|c| c.fit_percent >= crate::diagnose::PRACTICAL_FIT_PERCENT);
     let low: Vec<String> = [("v", d.nominal.channels.v), ("ω", d.nominal.channels.w)]
         .iter()
         .filter(|(_, c)| c.fit_percent < crate::diagnose::LOW_FIT_PERCENT)
         .map(|(n, c)| format!("{n}'s validation fit is {:.1} %", c.fit_percent))
         .collect();
     let verdict = match (tested, low.is_empty()) {
-        (true, _) if !d.mismatch => format!(
+        (true, _) if !d.mismatch && practical => format!(
             "no practical mismatch: evidence survives Holm's correction, but the model explains \
              ≥ {:.0} % of every channel (fits v {:.2} %, ω {:.2} %); the model is kept",
             crate::diagnose::PRACTICAL_FIT_PERCENT,
             d.nominal.channels.v.fit_percent,
             d.nominal.channels.w.fit_percent
         ),
+        (true, _) if !d.mismatch => "no mismatch kept: evidence survives Holm's correction, but \
+             no candidate improves the held-out fit and the residual is then independent of the \
+             commands; the model is kept"
+            .to_string(),
         (true, _) => "mismatch: evidence survives Holm's correction".to_string(),
         (false, false) => format!(
             "mismatch: {} (below {:.0} %), though no test survives Holm's correction",

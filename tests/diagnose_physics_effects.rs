@@ -79,8 +79,9 @@ fn dry_friction_in_the_wheel_joints_is_named_wheel_friction() {
 }
 
 /// Clean rigid-body runs of both built-in profiles under every stamping convention (stated in
-/// the metadata) name nothing and leave nothing unexplained (the first round's tests may still
-/// flag structure — Khepera-like window_middle on this seed — that no candidate takes up): window-middle stamps are restamped before the fit, and
+/// the metadata) declare no mismatch — nothing named, nothing unexplained (the first round's
+/// tests may still flag structure that no candidate takes up: Khepera-like window_middle on
+/// this seed; the model is then kept): window-middle stamps are restamped before the fit, and
 /// residual structure at the 0.1 % level of a 99.9 % fit is no practical mismatch (before these
 /// two changes, 5 of 6 such runs on tuning seed 1 left "unexplained" or named an effect).
 /// Seed 401, not looked at before.
@@ -100,7 +101,7 @@ fn clean_runs_under_every_convention_declare_nothing() {
                 d.mismatch
             );
             assert!(
-                d.findings.is_empty() && d.unexplained.is_none(),
+                !d.mismatch && d.findings.is_empty() && d.unexplained.is_none(),
                 "{} {}: {:?} {:?}",
                 p.name,
                 timing.name(),

@@ -114,7 +114,10 @@ pub(super) fn assemble(
             validation_s: seconds_of(&data.valid),
         },
         tests: out.tests,
-        mismatch: out.mismatch || unexplained.is_some(),
+        // The verdict: a model extended, or something left unexplained. First-round evidence
+        // that no candidate takes up and that leaves the residual independent of the commands
+        // is reported with the tests, but the model is kept.
+        mismatch: !out.findings.is_empty() || unexplained.is_some(),
         location,
         fingerprints: out.rounds,
         findings: out.findings,

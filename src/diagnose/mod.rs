@@ -262,7 +262,9 @@ pub struct Diagnosis {
     pub split: Split,
     /// The first round's test family with Holm decisions (step 2).
     pub tests: Vec<TestResult>,
-    /// Whether a mismatch was declared.
+    /// The verdict: whether the model was extended or something is left unexplained (first-
+    /// round evidence that no candidate takes up and that leaves the residual independent of the
+    /// commands keeps the model; `tests` shows it).
     pub mismatch: bool,
     /// Where the nominal model's misfit lives (step 3).
     pub location: Location,
