@@ -12,10 +12,11 @@
 //! 2. clip to ±sat                                   Terms::sat          [m/s, rad/s]
 //! 3. slew at most at accel                          Terms::accel        [m/s², rad/s²]
 //! 4. wheel setpoints v ± dω/2 × 2ρ/(1+ρ), 2/(1+ρ)   Terms::ratio        [-]
-//! 5. × (1 + drift (t − t0))                         Terms::drift        [1/s]
-//! θ1 v̇ = u_v + θ3 ω² − θ4 v − c_v tanh(v/ε_v) − θ4 k_v v |ω|
-//! θ2 ω̇ = u_ω − θ5 v ω − θ6 ω − c_ω tanh(ω/ε_ω) − θ6 k_ω |v| ω
+//! 5. drive gain g = 1 + drift (t − t0)              Terms::drift        [1/s]
+//! θ1 v̇ = g (u_v − v) − (θ4 − 1) v + θ3 ω² − c_v tanh(v/ε_v) − θ4 k_v v |ω|
+//! θ2 ω̇ = g (u_ω − ω) − (θ6 − 1) ω − θ5 v ω − c_ω tanh(ω/ε_ω) − θ6 k_w |v| ω
 //!                                                   Terms::coulomb, Terms::slip
+//! each wheel's effort clamped (the g (u − v) terms)  Terms::clamp        [m/s]
 //! θ1, θ2, θ3, θ5 replaced from a time on            Terms::payload
 //! ```
 //!
@@ -43,10 +44,23 @@ pub struct Terms {
     pub ratio: Option<f64>,
     /// Change time [s] and θ1, θ2, θ3, θ5 after it.
     pub payload: Option<(f64, [f64; 4])>,
-    /// Relative change of the setpoint gain per second [1/s].
+    /// Relative change of the drive gain per second [1/s]: the loop's effort × (1 + drift (t − t0)).
     pub drift: f64,
     /// Losses per unit v·|ω| [s/rad] and |v|·ω [s/m].
     pub slip: [f64; 2],
+    /// Per-wheel effort clamp ([`ClampTerms`]).
+    pub clamp: Option<ClampTerms>,
+}
+
+/// A clamp on each wheel's effort (`effort_clamp`): with E_v = u_v − g v, E_ω = u_ω − g ω the
+/// speed loop's efforts, the wheels' e_R,L = E_v ± κ E_ω (κ = `mix` · d/2) are clamped to
+/// ±`effort_max` and recombined, (ē_R + ē_L)/2 and (ē_R − ē_L)/(2κ), in place of E_v, E_ω.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ClampTerms {
+    /// Largest |wheel effort| [m/s of rim speed error].
+    pub effort_max: f64,
+    /// κ relative to the wheel-PD loop's d/2 [-].
+    pub mix: f64,
 }
 
 /// A generalised force an effect adds to eq. 2.19's right-hand sides, θ1 v̇ = … + f_v and
@@ -164,6 +178,8 @@ pub struct FitData<'a> {
     pub covariance: &'a nalgebra::DMatrix<f64>,
     /// Where this effect's parameters start in `theta`.
     pub base: usize,
+    /// Wheel track d [m], if known.
+    pub track: Option<f64>,
 }
 
 impl FitData<'_> {

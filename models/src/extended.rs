@@ -12,13 +12,13 @@
 //!    most at the given rates (exact slew per integration sub-step);
 //! 4. `wheel_asymmetry` (`ratio` ρ): wheel setpoints v ± dω/2 scaled by 2ρ/(1 + ρ) and
 //!    2/(1 + ρ), d the track given to [`Extended::new`];
-//! 5. `gain_drift` (`rate_per_s`): the setpoint scaled by 1 + rate_per_s·(t − t_0);
 //!
-//! then
+//! then, with g = 1 + rate_per_s·(t − t_0) the drive gain of `gain_drift` (`rate_per_s`; 1
+//! without it: the amplifier's gain scales the speed loop's whole effort),
 //!
 //! ```text
-//! θ1 v̇ = u_v + θ3 ω² − θ4 v − v_coulomb tanh(v/ε_v) − θ4 k_v v |ω|
-//! θ2 ω̇ = u_ω − θ5 v ω − θ6 ω − w_coulomb tanh(ω/ε_ω) − θ6 k_w |v| ω
+//! θ1 v̇ = g (u_v − v) − (θ4 − 1) v + θ3 ω² − v_coulomb tanh(v/ε_v) − θ4 k_v v |ω|
+//! θ2 ω̇ = g (u_ω − ω) − (θ6 − 1) ω − θ5 v ω − w_coulomb tanh(ω/ε_ω) − θ6 k_w |v| ω
 //! ```
 //!
 //! with `coulomb_friction` (`v_coulomb`, `w_coulomb`, ε = 2 mm/s, 0.01 rad/s), `slip` (`k_v`,
@@ -209,6 +209,8 @@ struct Field {
     /// Whether dry friction is present (its tanh dominates the cost of a step).
     dry: bool,
     slip: [f64; 2],
+    /// Per-wheel effort clamp: (effort_max [m/s], κ [m]).
+    clamp: Option<(f64, f64)>,
 }
 
 impl Field {
@@ -227,8 +229,10 @@ impl Field {
         let [kv, kw] = self.slip;
         let (v, w) = (z[0], z[1]);
         let u = c.u;
-        let mut fv = u[0] + th[2] * w * w - th[3] * v - th[3] * kv * v * w.abs();
-        let mut fw = u[1] - th[4] * v * w - th[5] * w - th[5] * kw * v.abs() * w;
+        // The drive gain's extra loop feedback, −(g − 1)(v, ω) (module docs).
+        let lost = c.g - 1.0;
+        let mut fv = u[0] + th[2] * w * w - (th[3] + lost) * v - th[3] * kv * v * w.abs();
+        let mut fw = u[1] - th[4] * v * w - (th[5] + lost) * w - th[5] * kw * v.abs() * w;
         let (mut dry_v, mut dry_w) = (0.0, 0.0);
         if self.dry {
             let (tv, tw) = ((v / FRICTION_EPS[0]).tanh(), (w / FRICTION_EPS[1]).tanh());
@@ -238,6 +242,19 @@ impl Field {
             dry_w = self.coulomb[1] * (1.0 - tw * tw) / FRICTION_EPS[1];
         }
         let mut jf = [[0.0; 2]; 2];
+        // ∂(clamped − unclamped effort)/∂u, for the command's sensitivities.
+        let mut ju = [[0.0; 2]; 2];
+        if let Some((cl, kappa)) = self.clamp {
+            let (df, dj) = clamp_correction(cl, kappa, c.g, [u[0] - c.g * v, u[1] - c.g * w]);
+            fv += df[0];
+            fw += df[1];
+            for r in 0..2 {
+                for k in 0..2 {
+                    jf[r][k] += dj[r][k];
+                    ju[r][k] = -dj[r][k] / c.g;
+                }
+            }
+        }
         for (e, p) in &self.forces {
             let force = e.force(p, v, w, self.track);
             fv += force.f[0];
@@ -252,10 +269,11 @@ impl Field {
         out[1] = fw * inv[1];
         if M == NS {
             let sign = |x: f64| if x == 0.0 { 0.0 } else { x.signum() };
-            let a00 = (-th[3] * (1.0 + kv * w.abs()) - dry_v + jf[0][0]) * inv[0];
+            let a00 = (-th[3] * (1.0 + kv * w.abs()) - lost - dry_v + jf[0][0]) * inv[0];
             let a01 = (2.0 * th[2] * w - th[3] * kv * v * sign(w) + jf[0][1]) * inv[0];
             let a10 = (-th[4] * w - th[5] * kw * sign(v) * w + jf[1][0]) * inv[1];
-            let a11 = (-th[4] * v - th[5] * (1.0 + kw * v.abs()) - dry_w + jf[1][1]) * inv[1];
+            let a11 =
+                (-th[4] * v - th[5] * (1.0 + kw * v.abs()) - lost - dry_w + jf[1][1]) * inv[1];
             for a in 0..M {
                 let (sv, sw) = (z[2 + a], z[2 + M + a]);
                 out[2 + a] = a00 * sv + a01 * sw;
@@ -263,8 +281,9 @@ impl Field {
             }
             if c.live {
                 for a in 0..M {
-                    out[2 + a] += c.du[0][a] * inv[0];
-                    out[2 + M + a] += c.du[1][a] * inv[1];
+                    let (d0, d1) = (c.du[0][a], c.du[1][a]);
+                    out[2 + a] += (d0 + ju[0][0] * d0 + ju[0][1] * d1) * inv[0];
+                    out[2 + M + a] += (d1 + ju[1][0] * d0 + ju[1][1] * d1) * inv[1];
                 }
             }
             // ∂f/∂θ: the sources of θ1…θ6's columns (v0, ω0 have none).
@@ -280,6 +299,27 @@ impl Field {
     }
 }
 
+/// The per-wheel effort clamp's correction of eq. 2.19's efforts E = (E_v, E_ω) (module docs of
+/// `effects::EffortClamp`): Δ = (Ē_v − E_v, Ē_ω − E_ω) with the wheels' efforts E_v ± κ E_ω
+/// clamped to ±`cl`, and ∂Δ/∂(v, ω) for drive gain `g` (E = u − g (v, ω)).
+#[inline]
+fn clamp_correction(cl: f64, kappa: f64, g: f64, e: [f64; 2]) -> ([f64; 2], [[f64; 2]; 2]) {
+    let wheels = [e[0] + kappa * e[1], e[0] - kappa * e[1]];
+    let clamped = wheels.map(|x| x.clamp(-cl, cl));
+    let ev = 0.5 * (clamped[0] + clamped[1]);
+    let ew = (clamped[0] - clamped[1]) / (2.0 * kappa);
+    // 1 where a wheel's effort still follows its error, 0 where it is clamped.
+    let [fr, fl] = wheels.map(|x| if x.abs() < cl { 1.0 } else { 0.0 });
+    let (sum, diff) = (0.5 * (fr + fl), 0.5 * (fr - fl));
+    (
+        [ev - e[0], ew - e[1]],
+        [
+            [g * (1.0 - sum), -g * kappa * diff],
+            [-g * diff / kappa, g * (1.0 - sum)],
+        ],
+    )
+}
+
 /// Sensitivity columns integrated analytically: θ1…θ6, v0, ω0.
 const NS: usize = 8;
 /// The augmented state of the sensitivity pass: v, ω, ∂v/∂p, ∂ω/∂p.
@@ -289,22 +329,30 @@ const NZ: usize = 2 + 2 * NS;
 /// `M` = 0 in a plain simulation, [`NS`] in the sensitivity pass.
 /// `live` is false while `du` is zero (almost always: the command depends on (θ, x0) only before
 /// the first delayed command and while a rate limit slews from the holding command), so that
-/// the pass skips it.
+/// the pass skips it. `g` is the drive gain of `gain_drift` (1 without it); `u` already
+/// carries it (g × the setpoint).
 #[derive(Clone, Copy)]
 struct Cmd<const M: usize> {
     u: [f64; 2],
     du: [[f64; M]; 2],
     live: bool,
+    g: f64,
 }
 
 impl<const M: usize> Cmd<M> {
     fn at(u: [f64; 2], du: [[f64; M]; 2], live: bool) -> Self {
-        Self { u, du, live }
+        Self {
+            u,
+            du,
+            live,
+            g: 1.0,
+        }
     }
     /// `self` + f (`other` − `self`).
     fn lerp(&self, other: &Self, f: f64) -> Self {
         let mut out = *self;
         out.u = [0, 1].map(|k| self.u[k] + f * (other.u[k] - self.u[k]));
+        out.g = self.g + f * (other.g - self.g);
         if self.live || other.live {
             out.du = [0, 1].map(|k| {
                 std::array::from_fn(|j| self.du[k][j] + f * (other.du[k][j] - self.du[k][j]))
@@ -485,7 +533,8 @@ impl Extended {
                 Cmd::at([c.0, c.1], [[0.0; M]; 2], false)
             }
         };
-        // Setpoint pipeline after the delay: saturation → rate limit (state) → asymmetry → drift.
+        // Setpoint pipeline after the delay: saturation → rate limit (state) → asymmetry → drive
+        // gain.
         let target = |c: Cmd<M>| match ph.sat {
             Some(lim) => {
                 let mut out = c;
@@ -514,6 +563,7 @@ impl Extended {
         let shaped = |c: &Cmd<M>, t: f64| {
             let mut out = *c;
             out.u = shape(c.u, t);
+            out.g = 1.0 + ph.drift * (t - t0);
             if c.live {
                 for j in 0..M {
                     let col = shape([c.du[0][j], c.du[1][j]], t);
@@ -542,6 +592,7 @@ impl Extended {
             coulomb: ph.coulomb,
             dry,
             slip: ph.slip,
+            clamp: ph.clamp.map(|c| (c.effort_max, c.mix * 0.5 * self.track)),
         };
         // The rate-limited setpoint starts where it holds the initial state (a robot at rest
         // holds zero), as the simulator's.
@@ -712,6 +763,48 @@ mod tests {
         }
     }
 
+    /// A step on both wheels that clamps them: θ1 v̇ = c − (θ4 − 1) v while u − v > c, i.e.
+    /// v = c/(θ4 − 1)(1 − e^{−(θ4−1)t/θ1}) up to v = u − c at t1, then the plain lag towards
+    /// u/θ4; a turn on the spot clamps both wheels opposite: θ2 ω̇ = c/κ − (θ6 − 1) ω.
+    #[test]
+    fn effort_clamp_matches_its_closed_form() {
+        let (c, track, mu) = (0.2, 0.3, 1.5);
+        let kappa = mu * track / 2.0;
+        let e = Extended::new(&[Candidate::EFFORT_CLAMP], track).expect("model");
+        let mut th = THETA.to_vec();
+        th.extend([c, mu]);
+        let (u, a4) = (1.0, THETA[3] - 1.0);
+        let rec = recording(false, 101, |_| (u, 0.0));
+        let [v, _] = <[Vec<f64>; 2]>::try_from(e.simulate(&th, &rec, &[0.0, 0.0]).expect("sim"))
+            .expect("two channels");
+        let clamped = |t: f64| c / a4 * (1.0 - (-a4 * t / THETA[0]).exp());
+        let t1 = -THETA[0] / a4 * (1.0 - a4 * (u - c) / c).ln();
+        let tau = THETA[0] / THETA[3];
+        for (k, vk) in v.iter().enumerate() {
+            let t = rec.t[k];
+            let want = if t <= t1 {
+                clamped(t)
+            } else {
+                u / THETA[3] + (u - c - u / THETA[3]) * (-(t - t1) / tau).exp()
+            };
+            approx::assert_abs_diff_eq!(*vk, want, epsilon = 2e-4);
+        }
+        // Spin: ω_ref = 6 rad/s, the wheels' efforts ±κ (6 − ω) stay above c over the 1 s.
+        // (θ3 = θ5 = 0: no coupling through v.)
+        let rec = recording(false, 11, |_| (0.0, 6.0));
+        th[2] = 0.0;
+        th[4] = 0.0;
+        let [_, w] = <[Vec<f64>; 2]>::try_from(e.simulate(&th, &rec, &[0.0, 0.0]).expect("sim"))
+            .expect("two channels");
+        let a6 = THETA[5] - 1.0;
+        for (k, wk) in w.iter().enumerate() {
+            let t = rec.t[k];
+            let want = c / kappa / a6 * (1.0 - (-a6 * t / THETA[1]).exp());
+            assert!(kappa * (6.0 - want) > c);
+            approx::assert_abs_diff_eq!(*wk, want, epsilon = 1e-8);
+        }
+    }
+
     #[test]
     fn analytic_sensitivities_match_central_differences_with_every_candidate() {
         // A rich command with a start at speed (the holding command matters before the first
@@ -731,6 +824,11 @@ mod tests {
             (vec![Candidate::GAIN_DRIFT], vec![0.01]),
             (vec![Candidate::SLIP], vec![0.05, 0.1]),
             (vec![Candidate::WHEEL_FRICTION], vec![0.03]),
+            (vec![Candidate::EFFORT_CLAMP], vec![0.12, 1.3]),
+            (
+                vec![Candidate::GAIN_DRIFT, Candidate::EFFORT_CLAMP],
+                vec![-0.01, 0.12, 0.8],
+            ),
             (
                 vec![Candidate::COULOMB_FRICTION, Candidate::WHEEL_FRICTION],
                 vec![0.02, 0.05, 0.03],

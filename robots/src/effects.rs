@@ -14,14 +14,18 @@
 //!    [m/s²], w_accel_max [rad/s²] (a base's velocity ramp, ARIA's `TransAccel`/`RotAccel`);
 //! 4. `wheel_asymmetry`: wheel setpoints v_ref ± d ω_ref / 2 scaled by 2ρ/(1 + ρ) (right) and
 //!    2/(1 + ρ) (left), ρ = `ratio`, so v_ref leaks into ω by 2(ρ − 1)/((1 + ρ) d) · v_ref;
-//! 5. `gain_drift`: the setpoint scaled by 1 + rate_per_s · τ (a draining battery: rate < 0);
 //!
 //! and then integrates
 //!
 //! ```text
-//! θ1 v̇ = u_v + θ3 ω² − θ4 v − c_v tanh(v / ε_v) + θ4 v̄ˢ
-//! θ2 ω̇ = u_ω − θ5 v ω − θ6 ω − c_ω tanh(ω / ε_ω) + θ6 ω̄ˢ
+//! θ1 v̇ = g (u_v − v) − (θ4 − 1) v + θ3 ω² − c_v tanh(v / ε_v) + θ4 v̄ˢ
+//! θ2 ω̇ = g (u_ω − ω) − (θ6 − 1) ω − θ5 v ω − c_ω tanh(ω / ε_ω) + θ6 ω̄ˢ
 //! ```
+//!
+//! where g = 1 + rate_per_s · τ is the drive gain of `gain_drift` (1 without it): a draining
+//! battery (rate < 0) scales the amplifier's output, i.e. the whole proportional effort of the
+//! speed loop, while back-EMF and viscous losses (θ4 − 1, θ6 − 1) and inertia stay (the share of
+//! θ1, θ2 that is the loop's derivative gain is taken as small);
 //!
 //! with θ switched to `payload_change.theta_after` from `time_s` on; `coulomb_friction` gives
 //! c_v, c_ω in command units (dry friction smoothed over ε_v = 2 mm/s, ε_ω = 0.01 rad/s, so that
@@ -106,11 +110,12 @@ impl PayloadChange {
     }
 }
 
-/// Slow change of the actuator gain over the run.
+/// Slow change of the drive (amplifier) gain over the run: the speed loop's effort is scaled by
+/// g = 1 + rate_per_s · τ (module docs).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct GainDrift {
-    /// Relative gain change per second [1/s] (a draining battery is negative).
+    /// Relative drive-gain change per second [1/s] (a draining battery is negative).
     pub rate_per_s: f64,
 }
 

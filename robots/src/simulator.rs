@@ -279,22 +279,25 @@ impl SimRobot {
             uv = (vr + vl) / 2.0;
             uw = (vr - vl) / d;
         }
-        if let Some(g) = self.effects.gain_drift {
-            let gain = 1.0 + g.rate_per_s * tau;
-            uv *= gain;
-            uw *= gain;
-        }
         [uv, uw]
     }
 
-    /// Derivative of the state under setpoint `u` and parameters `th`.
+    /// The drive gain g at time `tau` [s] (`gain_drift`: 1 + rate_per_s · τ; else 1).
+    fn drive_gain(&self, tau: f64) -> f64 {
+        self.effects
+            .gain_drift
+            .map_or(1.0, |g| 1.0 + g.rate_per_s * tau)
+    }
+
+    /// Derivative of the state under setpoint `u`, parameters `th` and drive gain `g` (the
+    /// loop's effort g (u − v), g (u_ω − ω); module docs).
     #[inline]
-    fn f(&self, s: &[f64; 5], u: [f64; 2], th: &[f64; 6]) -> [f64; 5] {
+    fn f(&self, s: &[f64; 5], u: [f64; 2], th: &[f64; 6], g: f64) -> [f64; 5] {
         let [_, _, psi, v, w] = *s;
         let (sn, cs) = psi.sin_cos();
         let a = self.profile.a;
-        let mut fv = u[0] + th[2] * w * w - th[3] * v;
-        let mut fw = u[1] - th[4] * v * w - th[5] * w;
+        let mut fv = g * u[0] + th[2] * w * w - (th[3] - 1.0 + g) * v;
+        let mut fw = g * u[1] - th[4] * v * w - (th[5] - 1.0 + g) * w;
         if let Some(c) = self.effects.coulomb_friction {
             fv -= c.v_coulomb * (v / FRICTION_EPS[0]).tanh();
             fw -= c.w_coulomb * (w / FRICTION_EPS[1]).tanh();
@@ -325,14 +328,15 @@ impl SimRobot {
             let tau = t0 + i as f64 * h;
             let u = self.setpoint_at(tau, h);
             let th = self.theta_at(tau);
+            let g = self.drive_gain(tau + 0.5 * h);
             let s = self.s;
-            let k1 = self.f(&s, u, &th);
+            let k1 = self.f(&s, u, &th, g);
             let s2 = std::array::from_fn(|j| s[j] + 0.5 * h * k1[j]);
-            let k2 = self.f(&s2, u, &th);
+            let k2 = self.f(&s2, u, &th, g);
             let s3 = std::array::from_fn(|j| s[j] + 0.5 * h * k2[j]);
-            let k3 = self.f(&s3, u, &th);
+            let k3 = self.f(&s3, u, &th, g);
             let s4 = std::array::from_fn(|j| s[j] + h * k3[j]);
-            let k4 = self.f(&s4, u, &th);
+            let k4 = self.f(&s4, u, &th, g);
             let s1: [f64; 5] = std::array::from_fn(|j| {
                 s[j] + h / 6.0 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j])
             });

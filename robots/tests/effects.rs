@@ -676,11 +676,28 @@ fn payload_change_scaled_on_the_coupled_pioneer() {
 // gain_drift
 // ---------------------------------------------------------------------------------------------
 
-/// The setpoint is scaled by 1 + r·t: a constant command c gives the lag's ramp response,
-/// v = (c/θ4)(1 + r(t − T)) + (c r T/θ4 − c/θ4) e^{−t/T}, T = θ1/θ4, i.e. the steady v tracks
-/// (1 + r(t − T))·c/θ4. Tolerance: one sub-step of drift.
+/// θ1 ẋ = g(t) c − (θ4 − 1 + g(t)) x, g = 1 + r t, from x(0) = 0: the integrating factor gives
+/// x(t) = ∫₀ᵗ (c g(s)/θ1) exp(−[θ4 (t − s) + r (t² − s²)/2]/θ1) ds, evaluated here by
+/// Simpson's rule on 4,000 intervals (error ≪ 1e-9 of c/θ4 for these time constants).
+fn drive_gain_response(th1: f64, th4: f64, c: f64, r: f64, t: f64) -> f64 {
+    let n = 4000;
+    let h = t / n as f64;
+    let f = |s: f64| {
+        c * (1.0 + r * s) / th1 * (-(th4 * (t - s) + 0.5 * r * (t * t - s * s)) / th1).exp()
+    };
+    let inner: f64 = (1..n)
+        .map(|i| if i % 2 == 1 { 4.0 } else { 2.0 } * f(i as f64 * h))
+        .sum();
+    h / 3.0 * (f(0.0) + inner + f(t))
+}
+
+/// The drive gain g = 1 + r·t scales the loop's effort g (u − v) (module docs of effects.rs):
+/// a constant command c gives the integrating-factor solution of
+/// θ1 v̇ = g c − (θ4 − 1 + g) v ([`drive_gain_response`]), on both channels. Tolerance: one
+/// sub-step of drift. At 20 s with r = −0.02 the gain is 0.6 and v sits near the quasi-steady
+/// 0.6 c/(θ4 − 0.4), well off the setpoint drift's 0.6 c/θ4 when θ4 is near 1.
 #[test]
-fn gain_drift_scales_the_setpoint_linearly_in_time() {
+fn gain_drift_scales_the_drive_gain_linearly_in_time() {
     let p = decoupled();
     let th = p.theta;
     let substeps = 50;
@@ -699,12 +716,12 @@ fn gain_drift_scales_the_setpoint_linearly_in_time() {
             },
         ),
     );
-    let tol_v = (cv * r).abs() * h / th[3] + 1e-10;
-    let tol_w = (cw * r).abs() * h / th[5] + 1e-10;
-    for k in 0..rec.len() {
+    let tol_v = (cv * r).abs() * h / th[3] + 1e-9;
+    let tol_w = (cw * r).abs() * h / th[5] + 1e-9;
+    for k in (0..rec.len()).step_by(5) {
         let t = rec.t[k];
-        let ev = lag(th[0], th[3], 0.0, cv, cv * r, t);
-        let ew = lag(th[1], th[5], 0.0, cw, cw * r, t);
+        let ev = drive_gain_response(th[0], th[3], cv, r, t);
+        let ew = drive_gain_response(th[1], th[5], cw, r, t);
         assert!(
             (rec.v[k] - ev).abs() < tol_v,
             "t = {t}: v = {}, {ev}",
@@ -716,11 +733,13 @@ fn gain_drift_scales_the_setpoint_linearly_in_time() {
             rec.w[k]
         );
     }
-    // At 20 s the gain has fallen to 0.6: v ≈ 0.6·c/θ4 (lagging by T).
     let end = rec.len() - 1;
-    let big_t = th[0] / th[3];
-    assert!((rec.v[end] - (1.0 + r * (20.0 - big_t)) * cv / th[3]).abs() < tol_v);
-    assert!(rec.v[end] < 0.62 * cv / th[3]);
+    let quasi = 0.6 * cv / (th[3] - 0.4);
+    assert!(
+        (rec.v[end] - quasi).abs() < 0.02 * quasi,
+        "{} vs {quasi}",
+        rec.v[end]
+    );
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -16,6 +16,7 @@ pub(super) fn check_candidate(
         theta: &new.theta,
         covariance: &new.covariance,
         base,
+        track: data.track,
     };
     for j in (0..c.params().len()).filter(|j| !new.pinned.contains(&(base + j))) {
         c.effect()

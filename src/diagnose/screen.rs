@@ -73,7 +73,8 @@ pub(super) fn start_candidate(
     }
     // A limit's probe level is a rough reading of the data: scaled on a grid first.
     if matches!(search, Search::Limit { .. }) {
-        let active: Vec<usize> = (0..2)
+        // The probed levels only (a limit may have a parameter that is no level, as a mix).
+        let active: Vec<usize> = (nominee.pattern.param_of_col.iter().copied())
             .filter(|j| !nominee.pattern.inactive.contains(j))
             .collect();
         theta = level_grid(&theta, base, &active, &training_cost);

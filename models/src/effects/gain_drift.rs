@@ -1,5 +1,7 @@
-//! `gain_drift`: the setpoint gain changes slowly over the run, u × (1 + r (t − t0)). Its
-//! fingerprint: the residual scales with the command as time goes on.
+//! `gain_drift`: the drive (amplifier) gain changes slowly over the run — a battery sagging —
+//! g = 1 + r (t − t0) scaling the speed loop's whole effort, g (u − v), g (u_ω − ω): the
+//! closed loop slows down and its static gain falls a little ([`wheelid_core::Terms`]). Its
+//! fingerprint: the residual grows with the tracking error as time goes on.
 
 use wheelid_core::effect::{FitData, Probe, ProbeData, Terms, significant};
 use wheelid_core::{Effect, ParamInfo, Result};
@@ -7,11 +9,11 @@ use wheelid_core::{Effect, ParamInfo, Result};
 static PARAMS: [ParamInfo; 1] = [ParamInfo {
     name: "rate_per_s",
     unit: "1/s",
-    description: "relative change of the gains per second",
+    description: "relative change of the drive gain per second",
 }];
 
-/// Relative gain change per second r (stage 5 of [`Terms`]); null 0; plausible while it moves
-/// the gains by less than 50 % over the run.
+/// Relative drive-gain change per second r (`Terms::drift`); null 0; plausible while it moves
+/// the gain by less than 50 % over the run.
 #[derive(Debug, Clone, Copy)]
 pub struct GainDrift;
 
@@ -32,7 +34,7 @@ impl Effect for GainDrift {
         Some(Probe::Gradient(vec![(0, 1e-5)]))
     }
     fn evidence(&self) -> &'static str {
-        "the residual scales with the command as time goes on"
+        "the residual grows with the tracking error as time goes on"
     }
     fn plausible(
         &self,

@@ -5,6 +5,7 @@
 
 mod acceleration_limit;
 mod coulomb_friction;
+mod effort_clamp;
 mod gain_drift;
 mod input_delay;
 mod payload_change;
@@ -18,6 +19,7 @@ use wheelid_core::{Effect, ParamInfo};
 
 pub use acceleration_limit::{AccelerationLimit, slew_binding};
 pub use coulomb_friction::CoulombFriction;
+pub use effort_clamp::EffortClamp;
 pub use gain_drift::GainDrift;
 pub use input_delay::InputDelay;
 pub use payload_change::PayloadChange;
@@ -27,7 +29,7 @@ pub use wheel_asymmetry::WheelAsymmetry;
 pub use wheel_friction::WheelFriction;
 
 /// The registry: every built-in effect, in the order the diagnosis reports them.
-pub static EFFECTS: [&dyn Effect; 9] = [
+pub static EFFECTS: [&dyn Effect; 10] = [
     &InputDelay,
     &AccelerationLimit,
     &VelocitySaturation,
@@ -37,6 +39,7 @@ pub static EFFECTS: [&dyn Effect; 9] = [
     &GainDrift,
     &Slip,
     &WheelFriction,
+    &EffortClamp,
 ];
 
 /// A value far beyond any command: a limit at this level never binds (a limit's null).
@@ -94,6 +97,8 @@ impl Candidate {
     pub const SLIP: Candidate = Candidate(&Slip);
     /// Dry friction per wheel ([`WheelFriction`]).
     pub const WHEEL_FRICTION: Candidate = Candidate(&WheelFriction);
+    /// Per-wheel effort clamp ([`EffortClamp`]).
+    pub const EFFORT_CLAMP: Candidate = Candidate(&EffortClamp);
 
     /// A candidate for any effect (a built-in one of [`EFFECTS`] or the caller's own).
     pub fn new(effect: &'static dyn Effect) -> Self {

@@ -1,0 +1,140 @@
+//! `effort_clamp`: each wheel's drive effort is clamped — an amplifier at its supply voltage,
+//! a motor driver at its current limit. Not a clip of the setpoint nor a rate limit: while a
+//! wheel is clamped its loop's feedback is gone (its effort stays at the limit whatever the
+//! error), back-EMF and losses still act, so the top acceleration falls with speed; and one
+//! wheel clamping while the other does not turns the robot off its commanded heading, so v and
+//! ω are coupled (the complaint about ROS 2 `diff_drive_controller`'s per-wheel limits).
+//!
+//! With E_v = u_v − g v and E_ω = u_ω − g ω the speed loop's efforts in eq. 2.19 (g the drive
+//! gain, 1 without `gain_drift`; module docs of [`wheelid_core::effect`]), the wheels' efforts
+//! in rim-speed units are e_R,L = E_v ± κ E_ω, κ = μ d/2, and each is clamped to ±c:
+//!
+//! ```text
+//! ē_i = clamp(e_i, −c, c)
+//! θ1 v̇ = (ē_R + ē_L)/2      − (θ4 − 1) v + θ3 ω² …
+//! θ2 ω̇ = (ē_R − ē_L)/(2κ)   − (θ6 − 1) ω − θ5 v ω …
+//! ```
+//!
+//! Unclamped, this is eq. 2.19. μ = 1 for the wheel-PD controller (§2.2: each wheel's loop
+//! sees v ± dω/2); for the v/ω-PD controller (Appendix A.3) the wheel voltages are
+//! K_PT (v_ref − v) ± K_PR (ω_ref − ω), so κ = K_PR/K_PT, fitted as μ. In physical units:
+//! c = V_max r/k_P for the wheel-PD loop (V_max the amplifier's limit [V], r the wheel radius)
+//! and c = V_max/K_PT for the v/ω-PD loop. The derivative term's share of θ1, θ2 (which also
+//! vanishes while clamped) is taken as small.
+
+use wheelid_core::effect::{ClampTerms, FitData, Probe, ProbeData, Search, Terms, abs_quantile};
+use wheelid_core::{Effect, EffectChannels, ParamInfo, Recording, Result};
+
+use super::{NEVER, limit_plausible};
+
+static PARAMS: [ParamInfo; 2] = [
+    ParamInfo {
+        name: "effort_max",
+        unit: "m/s",
+        description: "largest wheel effort, in wheel rim speed error units",
+    },
+    ParamInfo {
+        name: "mix",
+        unit: "-",
+        description: "ω effort's share in each wheel, relative to the wheel-PD loop's d/2",
+    },
+];
+
+/// Per-wheel effort clamp c [m/s] and mixing μ (`Terms::clamp`); null: a level no effort
+/// reaches and μ = 1; needs the wheel track.
+#[derive(Debug, Clone, Copy)]
+pub struct EffortClamp;
+
+/// Fraction of the samples where either wheel's commanded effort (the recorded command less
+/// the recorded speed, mixed with κ = `half_track`) exceeds `level` [m/s].
+fn over(recs: &[Recording], half_track: f64, level: f64) -> f64 {
+    let (mut n, mut hit) = (0usize, 0usize);
+    for r in recs {
+        for k in 0..r.len() {
+            let (ev, ew) = (r.v_ref[k] - r.v[k], r.w_ref[k] - r.w[k]);
+            let e =
+                (ev.abs() + half_track * ew.abs()).max((ev.abs() - half_track * ew.abs()).abs());
+            hit += usize::from(e > level);
+            n += 1;
+        }
+    }
+    hit as f64 / n.max(1) as f64
+}
+
+impl Effect for EffortClamp {
+    fn name(&self) -> &'static str {
+        "effort_clamp"
+    }
+    fn params(&self) -> &'static [ParamInfo] {
+        &PARAMS
+    }
+    fn channels(&self) -> EffectChannels {
+        EffectChannels::Both
+    }
+    fn null(&self, _theta: &[f64], _t_mid: f64) -> Vec<f64> {
+        vec![NEVER, 1.0]
+    }
+    fn bounds(&self, _t_range: (f64, f64)) -> Vec<(f64, f64)> {
+        vec![(1e-6, f64::INFINITY), (0.05, 20.0)]
+    }
+    fn search(&self) -> Search {
+        Search::Limit { rate: false }
+    }
+    /// Level: the 99.5 % quantile of the effort the wheels delivered (eq. 2.19 solved for the
+    /// efforts from the measured accelerations), where the commanded effort exceeds 1.05 × that
+    /// on ≥ 1 % of the samples.
+    fn probe(&self, data: &ProbeData<'_>) -> Option<Probe> {
+        let half = 0.5 * data.track?;
+        let th = data.theta;
+        let delivered = data.recordings.iter().zip(data.accel).flat_map(|(r, a)| {
+            (0..r.len()).flat_map(move |k| {
+                let (v, w) = (r.v[k], r.w[k]);
+                let ev = th[0] * a[0][k] + (th[3] - 1.0) * v - th[2] * w * w;
+                let ew = th[1] * a[1][k] + (th[5] - 1.0) * w + th[4] * v * w;
+                [ev + half * ew, ev - half * ew]
+            })
+        });
+        let level = abs_quantile(delivered, 0.995);
+        let share = over(data.recordings, half, 1.05 * level);
+        (share >= 0.01 && level > 0.0).then(|| Probe::Levels {
+            levels: vec![(0, level)],
+            evidence: format!(
+                "the wheels' delivered effort tops out at {level:.3} m/s while the commanded \
+                 effort exceeds it on {:.1} % of the samples",
+                100.0 * share
+            ),
+        })
+    }
+    fn evidence(&self) -> &'static str {
+        "the wheels' effort tops out while the commanded effort exceeds it"
+    }
+    fn binding(&self, recordings: &[Recording], _ch: usize, _level: f64) -> Option<f64> {
+        // The mixing is not known here: the share at μ = 1 is reported by `plausible`.
+        let _ = recordings;
+        None
+    }
+    fn plausible(
+        &self,
+        j: usize,
+        x: f64,
+        se: f64,
+        fit: &FitData<'_>,
+    ) -> std::result::Result<(), String> {
+        if j == 1 {
+            return if (0.1..=10.0).contains(&x) {
+                Ok(())
+            } else {
+                Err(format!("mix = {x:.3} is no drive's (0.1…10)"))
+            };
+        }
+        let half = 0.5 * fit.track.unwrap_or(0.0) * fit.theta[fit.base + 1];
+        limit_plausible(&PARAMS[0], x, se, over(fit.recordings, half, x))
+    }
+    fn apply(&self, p: &[f64], terms: &mut Terms) -> Result<()> {
+        terms.clamp = Some(ClampTerms {
+            effort_max: p[0].abs(),
+            mix: p[1],
+        });
+        Ok(())
+    }
+}
