@@ -17,7 +17,8 @@
 //! It prints a markdown report ([`report`]): confusion matrices, the share of runs exactly
 //! right overall / per profile / per convention, the false-alarm rate on clean runs with a
 //! 95 % Clopper–Pearson interval, magnitude errors, fits and times; `--json FILE` writes one
-//! JSON record per run ([`Record`]).
+//! JSON record per run ([`Record`]); with `DIAGNOSE_PHYSICS_REPORTS` set in the environment
+//! every run's text report goes to stderr.
 //!
 //! Run through `scripts/diagnose_physics.sh` (seed split in its header), e.g.
 //! `scripts/diagnose_physics.sh --seeds 1..20 --cases all --threads 2`.
@@ -48,15 +49,16 @@ use wheelid::robots::physics::{
 /// (`wheelid_models::Candidate::names`) are listed beside the actuator-level names planned
 /// for later, so the table holds for both.
 ///
-/// Today's stand-ins, and why: a voltage clamp that binds in transients caps the torque, which
-/// shows as a cap on the acceleration (`acceleration_limit`); a sagging or decaying battery
-/// changes the drive's gain over the run (`gain_drift`); one weak amplifier and one larger tyre
+/// A voltage clamp is named right only as `effort_clamp` (each wheel's effort clamped; until
+/// that candidate existed an `acceleration_limit` was accepted as its stand-in); a sagging or
+/// decaying battery scales the drive's gain over the run (`gain_drift`, the loop's effort
+/// scaled); one weak amplifier and one larger tyre
 /// both make the wheels unequal (`wheel_asymmetry`); dry friction in the wheel joints is a
 /// Coulomb term (`coulomb_friction`); a slippery floor loses speed at high demand (`slip`).
 pub const TRUTH: [(&str, &[&str]); 10] = [
     ("latency", &["input_delay", "latency"]),
     ("rate_limit", &["acceleration_limit"]),
-    ("voltage_clamp", &["effort_clamp", "acceleration_limit"]),
+    ("voltage_clamp", &["effort_clamp"]),
     ("gain_sag", &["gain_sag", "gain_drift"]),
     ("gain_decay", &["gain_sag", "gain_drift"]),
     ("amp_gain_right", &["amp_asymmetry", "wheel_asymmetry"]),
@@ -407,6 +409,12 @@ pub fn draw_effects(
                 let volts = quantile(&d.volts, q);
                 fx.voltage_clamp = Some(volts);
                 m.insert("volts".into(), volts);
+                // In the effort_clamp's units (its module docs): V r/k_P, V/K_PT.
+                let effort = match p.controller {
+                    Controller::WheelPd { k_p, .. } => volts * p.r / k_p,
+                    Controller::VwPd { k_pt, .. } => volts / k_pt,
+                };
+                m.insert("effort_max".into(), effort);
                 m.insert("quantile".into(), q);
                 m.insert("binds_share".into(), share_above(&d.volts, volts));
             }
@@ -414,6 +422,7 @@ pub fn draw_effects(
                 let f = 0.1 + 0.2 * u(0);
                 fx.gain_sag = Some(f);
                 m.insert("fraction".into(), f);
+                m.insert("rate_per_s".into(), -f / spec.duration_s);
             }
             ("gain_decay", _) => {
                 let f = 0.1 + 0.2 * u(0);
@@ -421,6 +430,8 @@ pub fn draw_effects(
                 fx.gain_decay_tau_s = Some(tau);
                 m.insert("tau_s".into(), tau);
                 m.insert("fraction_lost".into(), f);
+                // The mean rate over the run (a straight line through e^(−t/τ)'s ends).
+                m.insert("rate_per_s".into(), -f / spec.duration_s);
             }
             ("amp_gain_right", _) => {
                 let g = if u(1) < 0.5 {
@@ -531,6 +542,22 @@ pub fn magnitudes(
                     "w_accel vs w_accel_max",
                     g("w_accel"),
                     est("w_accel_max"),
+                    false,
+                );
+            }
+            "gain_sag" | "gain_decay" => {
+                push(
+                    "−fraction/T vs rate_per_s",
+                    g("rate_per_s"),
+                    est("rate_per_s"),
+                    false,
+                );
+            }
+            "voltage_clamp" => {
+                push(
+                    "V r/k_P (V/K_PT) vs effort_max",
+                    g("effort_max"),
+                    est("effort_max"),
                     false,
                 );
             }
@@ -700,6 +727,17 @@ fn run_into(spec: &RunSpec, cache: &CleanRuns, rec: &mut Record) -> Result<()> {
     let clock = Instant::now();
     let d = diagnose(&[recording], model.as_ref(), &ds)?;
     rec.diagnose_s = clock.elapsed().as_secs_f64();
+    // For looking at a case: the full text report on stderr.
+    if std::env::var_os("DIAGNOSE_PHYSICS_REPORTS").is_some() {
+        eprintln!(
+            "=== {} {} {:?} seed {}\n{}",
+            spec.profile,
+            spec.timing.name(),
+            spec.effects,
+            spec.seed,
+            wheelid::report::diagnosis_text(&d)
+        );
+    }
     rec.named = d.findings.iter().map(|f| f.effect.clone()).collect();
     rec.named_params = d
         .findings

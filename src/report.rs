@@ -305,10 +305,15 @@ pub fn diagnosis_text(d: &Diagnosis) -> String {
         "2. Test (validation blocks): free-run fit {}.",
         fits(&d.nominal.channels)
     );
-    for ch in &d.location.channels {
+    let floor = [
+        d.nominal.channels.v.noise_ratio,
+        d.nominal.channels.w.noise_ratio,
+    ];
+    for (ch, ratio) in d.location.channels.iter().zip(floor) {
         let _ = writeln!(
             s,
-            "   {}: residual RMS {:.4}, whiteness Q = {:.0} (p = {:.1e}, not used alone)",
+            "   {}: residual RMS {:.4} = {ratio:.1} × the noise floor, whiteness Q = {:.0} \
+             (p = {:.1e}, not used alone)",
             ch.channel, ch.rms, ch.whiteness.q, ch.whiteness.p_value
         );
     }
@@ -330,6 +335,14 @@ pub fn diagnosis_text(d: &Diagnosis) -> String {
         .filter(|(_, c)| c.fit_percent < crate::diagnose::LOW_FIT_PERCENT)
         .map(|(n, c)| format!("{n}'s validation fit is {:.1} %", c.fit_percent))
         .collect();
+    let floor_words: Vec<String> = [("v", d.nominal.channels.v), ("ω", d.nominal.channels.w)]
+        .iter()
+        .filter(|(_, c)| {
+            c.fit_percent < crate::diagnose::PRACTICAL_FIT_PERCENT
+                && c.noise_ratio > crate::diagnose::NOISE_FLOOR_FACTOR
+        })
+        .map(|(n, c)| format!("{:.1} × on {n}", c.noise_ratio))
+        .collect();
     let verdict = match (tested, low.is_empty()) {
         (true, _) if !d.mismatch && practical => format!(
             "no practical mismatch: evidence survives Holm's correction, but the model explains \
@@ -347,6 +360,13 @@ pub fn diagnosis_text(d: &Diagnosis) -> String {
             "mismatch: {} (below {:.0} %), though no test survives Holm's correction",
             low.join(", "),
             crate::diagnose::LOW_FIT_PERCENT
+        ),
+        (false, true) if !floor_words.is_empty() => format!(
+            "mismatch: the residual is {} the noise floor (> {:.0} ×) with the fit below {:.0} %, \
+             though no test survives Holm's correction",
+            floor_words.join(", "),
+            crate::diagnose::NOISE_FLOOR_FACTOR,
+            crate::diagnose::PRACTICAL_FIT_PERCENT
         ),
         (false, true) if d.mismatch => {
             "mismatch: what the final model leaves is unexplained".into()

@@ -49,7 +49,7 @@ mod screen;
 mod search;
 
 use accept::*;
-pub use assemble::{LOW_FIT_PERCENT, PRACTICAL_FIT_PERCENT};
+pub use assemble::{LOW_FIT_PERCENT, NOISE_FLOOR_FACTOR, PRACTICAL_FIT_PERCENT};
 use fingerprint::*;
 use fit::*;
 use prepare::*;
@@ -140,6 +140,10 @@ pub struct ChannelFit {
     pub fit_percent: f64,
     /// RMS of y − ŷ [channel unit].
     pub rms: f64,
+    /// `rms` over the measurement noise floor σ_n (the RMS of what the conditioning's
+    /// zero-phase low-pass removes from the measurement, corrected for the white noise it
+    /// passes): near 1, the model explains all but the noise.
+    pub noise_ratio: f64,
 }
 
 /// Both channels' validation fits.

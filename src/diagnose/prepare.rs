@@ -18,6 +18,8 @@ pub(super) struct Data {
     pub(super) weight: [f64; 2],
     /// Measured accelerations (smoothed derivative) per recording.
     pub(super) accel: Outputs,
+    /// The measurement noise floor σ_n per channel [channel unit] ([`noise_floor`]).
+    pub(super) noise_floor: [f64; 2],
 }
 
 impl Data {
@@ -44,15 +46,19 @@ impl Data {
                 s[1].push(out[1][k]);
             }
         }
-        let fit = |c: usize| ChannelFit {
-            fit_percent: metrics::fit_percent(&y[c], &s[c]),
-            rms: (y[c]
+        let fit = |c: usize| {
+            let rms = (y[c]
                 .iter()
                 .zip(&s[c])
                 .map(|(a, b)| (a - b).powi(2))
                 .sum::<f64>()
                 / y[c].len().max(1) as f64)
-                .sqrt(),
+                .sqrt();
+            ChannelFit {
+                fit_percent: metrics::fit_percent(&y[c], &s[c]),
+                rms,
+                noise_ratio: rms / self.noise_floor[c].max(1e-12),
+            }
         };
         let cost = (0..2)
             .map(|c| {
@@ -234,19 +240,57 @@ fn nominal_fit(
 }
 
 /// Measured accelerations: the derivative of the zero-phase filtered response (zeros where
-/// the recording cannot be filtered).
-fn accelerations(recs: &[Recording], settings: &DiagnoseSettings) -> Outputs {
+/// the recording cannot be filtered); and the noise floor of each channel ([`noise_floor`]).
+fn accelerations(recs: &[Recording], settings: &DiagnoseSettings) -> (Outputs, [f64; 2]) {
     let cutoff = condition::suggest_cutoff(&recs.iter().collect::<Vec<_>>())
         .map(|(f, _)| f)
         .ok();
-    recs.iter()
+    let mut floor = NoiseFloor::default();
+    let accel = recs
+        .iter()
         .map(|r| {
-            let d = cutoff
-                .and_then(|fc| condition::condition(r, None, fc, &settings.condition).ok())
-                .and_then(|c| Some([c.differentiate(&c.v).ok()?, c.differentiate(&c.w).ok()?]));
+            let c =
+                cutoff.and_then(|fc| condition::condition(r, None, fc, &settings.condition).ok());
+            if let Some(c) = &c {
+                floor.add(c);
+            }
+            let d =
+                c.and_then(|c| Some([c.differentiate(&c.v).ok()?, c.differentiate(&c.w).ok()?]));
             d.unwrap_or_else(|| [vec![0.0; r.len()], vec![0.0; r.len()]])
         })
-        .collect()
+        .collect();
+    (accel, floor.sigma())
+}
+
+/// The measurement noise floor σ_n of each channel: the RMS of what the zero-phase low-pass
+/// of the conditioning removes (y − filtfilt(y), inside the valid range), scaled up by
+/// 1/√(1 − f_c/f_N) for the white noise the filter lets through (f_N the Nyquist frequency).
+/// Response content above the cut-off counts as noise too: the floor errs high.
+#[derive(Default)]
+struct NoiseFloor {
+    sum: [f64; 2],
+    n: usize,
+    kept: f64,
+}
+
+impl NoiseFloor {
+    fn add(&mut self, c: &wheelid_core::Conditioned) {
+        let (Ok(sv), Ok(sw)) = (c.smooth(&c.v), c.smooth(&c.w)) else {
+            return;
+        };
+        for k in c.valid_range() {
+            self.sum[0] += (c.v[k] - sv[k]).powi(2);
+            self.sum[1] += (c.w[k] - sw[k]).powi(2);
+            self.n += 1;
+        }
+        self.kept = (1.0 - c.filter.cutoff_hz / (0.5 * c.filter.fs_hz)).clamp(0.05, 1.0);
+    }
+    fn sigma(&self) -> [f64; 2] {
+        if self.n == 0 {
+            return [0.0; 2];
+        }
+        self.sum.map(|s| (s / self.n as f64 / self.kept).sqrt())
+    }
 }
 
 /// Step 1 and the nominal fit: the data prepared once for every later step, and the nominal
@@ -273,7 +317,7 @@ pub(super) fn prepare(
     let track = settings
         .track_m
         .or_else(|| recs.iter().find_map(track_from_meta));
-    let accel = accelerations(&recs, settings);
+    let (accel, noise_floor) = accelerations(&recs, settings);
     let weight = [0, 1].map(|c| 1.0 / fit.noise_std[c].max(1e-12));
     let data = Data {
         recs,
@@ -284,6 +328,7 @@ pub(super) fn prepare(
         track,
         weight,
         accel,
+        noise_floor,
     };
     Ok((data, fit))
 }

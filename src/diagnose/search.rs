@@ -73,13 +73,29 @@ fn test_round(
     let mut p_values = here.p_values();
     p_values.extend(nominees.iter().map(|n| n.p_value));
     let decisions = holm(&p_values, alpha);
+    let mut nominated = decisions[4..].to_vec();
+    // A residual well above the noise floor is a mismatch whatever the family says: then the
+    // fingerprints significant on their own are fitted (validation evidence still decides).
+    if above_floor(data, cur).iter().any(|&a| a) && !nominated.iter().any(|&d| d) {
+        nominated = nominees.iter().map(|n| n.p_value < alpha).collect();
+    }
     Some(Round {
-        nominated: decisions[4..].to_vec(),
+        nominated,
         nominees,
         p_values,
         decisions,
         jacobian,
         q,
+    })
+}
+
+/// The channels whose validation residual is above the noise floor by more than
+/// [`NOISE_FLOOR_FACTOR`] while their fit is below [`PRACTICAL_FIT_PERCENT`].
+pub(super) fn above_floor(data: &Data, cur: &Current) -> [bool; 2] {
+    let (fits, _) = data.validate(&cur.sim);
+    [fits.v, fits.w].map(|c| {
+        (c.fit_percent.is_nan() || c.fit_percent < PRACTICAL_FIT_PERCENT)
+            && c.noise_ratio > NOISE_FLOOR_FACTOR
     })
 }
 
@@ -349,18 +365,19 @@ pub(super) fn run(
         let Some(round) = test_round(data, &cur, &pending, &here, settings.alpha) else {
             break;
         };
+        // Evidence counts only where the model misses a practically relevant share of a
+        // channel (a 99.9 % fit with structure at the 0.1 % level is kept), in every round.
+        let (fits, _) = data.validate(&cur.sim);
+        let relevant = [fits.v.fit_percent, fits.w.fit_percent]
+            .iter()
+            .any(|f| f.is_nan() || *f < PRACTICAL_FIT_PERCENT);
         if round_no == 0 {
             out.tests = family(&round);
-            // Evidence counts as a mismatch only where the model misses a practically relevant
-            // share of a channel (a 99.9 % fit with structure at the 0.1 % level is kept).
-            let (fits, _) = data.validate(&cur.sim);
-            let relevant = [fits.v.fit_percent, fits.w.fit_percent]
-                .iter()
-                .any(|f| f.is_nan() || *f < PRACTICAL_FIT_PERCENT);
-            out.mismatch = round.decisions.iter().any(|&d| d) && relevant;
+            let floor = above_floor(data, &cur).iter().any(|&a| a);
+            out.mismatch = (round.decisions.iter().any(|&d| d) || floor) && relevant;
         }
         out.rounds.push(fingerprints(&round));
-        if round_no == settings.max_effects || !out.mismatch {
+        if round_no == settings.max_effects || !out.mismatch || !relevant {
             break;
         }
         let accepted = first_accepted(data, &cur, &round, settings, progress, &mut tried, &mut out);
