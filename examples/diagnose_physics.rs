@@ -52,8 +52,12 @@ use wheelid::robots::physics::{
 /// A voltage clamp is named right only as `effort_clamp` (each wheel's effort clamped; until
 /// that candidate existed an `acceleration_limit` was accepted as its stand-in); a sagging or
 /// decaying battery scales the drive's gain over the run (`gain_drift`, the loop's effort
-/// scaled); one weak amplifier and one larger tyre
-/// both make the wheels unequal (`wheel_asymmetry`); dry friction in the wheel joints is a
+/// scaled); one weak amplifier scales its wheel's whole effort (`amp_asymmetry`; the setpoint
+/// ratio `wheel_asymmetry` was its stand-in before); one larger tyre makes the wheels unequal
+/// (`wheel_asymmetry`), and from encoder data alone it cannot be told from a weak amplifier:
+/// the loop holds the wheel's rate whatever its radius, and the larger tyre shows only as that
+/// wheel's share of the chassis inertia growing, i.e. its effort acting weaker in transients
+/// (`amp_asymmetry` is accepted for it; the pose would tell them apart, the encoders do not); dry friction in the wheel joints is a
 /// Coulomb term (`coulomb_friction`); a slippery floor loses speed at high demand (`slip`).
 pub const TRUTH: [(&str, &[&str]); 10] = [
     ("latency", &["input_delay", "latency"]),
@@ -61,8 +65,11 @@ pub const TRUTH: [(&str, &[&str]); 10] = [
     ("voltage_clamp", &["effort_clamp"]),
     ("gain_sag", &["gain_sag", "gain_drift"]),
     ("gain_decay", &["gain_sag", "gain_drift"]),
-    ("amp_gain_right", &["amp_asymmetry", "wheel_asymmetry"]),
-    ("tyre_radius_right", &["tyre_asymmetry", "wheel_asymmetry"]),
+    ("amp_gain_right", &["amp_asymmetry"]),
+    (
+        "tyre_radius_right",
+        &["tyre_asymmetry", "wheel_asymmetry", "amp_asymmetry"],
+    ),
     ("dry_friction", &["wheel_friction", "coulomb_friction"]),
     ("floor_mu", &["traction_limit", "slip"]),
     ("payload", &["payload_change"]),
@@ -561,7 +568,12 @@ pub fn magnitudes(
                     false,
                 );
             }
-            "amp_gain_right" => push("gain vs ratio (−1)", g("gain"), est("ratio"), true),
+            "amp_gain_right" => push(
+                "gain vs right_gain (−1)",
+                g("gain"),
+                est("right_gain"),
+                true,
+            ),
             "tyre_radius_right" => push("factor vs ratio (−1)", g("factor"), est("ratio"), true),
             "dry_friction" => {
                 push(

@@ -16,7 +16,7 @@
 //! θ1 v̇ = g (u_v − v) − (θ4 − 1) v + θ3 ω² − c_v tanh(v/ε_v) − θ4 k_v v |ω|
 //! θ2 ω̇ = g (u_ω − ω) − (θ6 − 1) ω − θ5 v ω − c_ω tanh(ω/ε_ω) − θ6 k_w |v| ω
 //!                                                   Terms::coulomb, Terms::slip
-//! each wheel's effort clamped (the g (u − v) terms)  Terms::clamp        [m/s]
+//! each wheel's effort scaled, clamped (g (u − v))   Terms::wheels       [-, m/s]
 //! θ1, θ2, θ3, θ5 replaced from a time on            Terms::payload
 //! ```
 //!
@@ -48,19 +48,33 @@ pub struct Terms {
     pub drift: f64,
     /// Losses per unit v·|ω| [s/rad] and |v|·ω [s/m].
     pub slip: [f64; 2],
-    /// Per-wheel effort clamp ([`ClampTerms`]).
-    pub clamp: Option<ClampTerms>,
+    /// Per-wheel efforts: a gain on the right wheel's, a clamp ([`WheelTerms`]).
+    pub wheels: Option<WheelTerms>,
 }
 
-/// A clamp on each wheel's effort (`effort_clamp`): with E_v = u_v − g v, E_ω = u_ω − g ω the
-/// speed loop's efforts, the wheels' e_R,L = E_v ± κ E_ω (κ = `mix` · d/2) are clamped to
-/// ±`effort_max` and recombined, (ē_R + ē_L)/2 and (ē_R − ē_L)/(2κ), in place of E_v, E_ω.
+/// The speed loop's effort per wheel (`amp_asymmetry`, `effort_clamp`): with E_v = u_v − g v,
+/// E_ω = u_ω − g ω the loop's efforts in eq. 2.19, the wheels' e_R,L = E_v ± κ E_ω
+/// (κ = `mix` · d/2); the right one is scaled by `right_gain`, both are clamped to
+/// ±`effort_max`, and they are recombined, (ē_R + ē_L)/2 and (ē_R − ē_L)/(2κ), in place of
+/// E_v, E_ω. An effect sets its fields and leaves the others.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ClampTerms {
-    /// Largest |wheel effort| [m/s of rim speed error].
+pub struct WheelTerms {
+    /// Right wheel's effort gain relative to the left's [-].
+    pub right_gain: f64,
+    /// Largest |wheel effort| [m/s of rim speed error] (infinite: no clamp).
     pub effort_max: f64,
     /// κ relative to the wheel-PD loop's d/2 [-].
     pub mix: f64,
+}
+
+impl Default for WheelTerms {
+    fn default() -> Self {
+        Self {
+            right_gain: 1.0,
+            effort_max: f64::INFINITY,
+            mix: 1.0,
+        }
+    }
 }
 
 /// A generalised force an effect adds to eq. 2.19's right-hand sides, θ1 v̇ = … + f_v and

@@ -21,7 +21,7 @@ pub mod signal;
 pub mod solver;
 
 pub use condition::{ConditionSettings, Conditioned, CutoffChoice};
-pub use effect::{ClampTerms, Effect, EffectChannels, Force, Probe, Search, Terms};
+pub use effect::{Effect, EffectChannels, Force, Probe, Search, Terms, WheelTerms};
 pub use error::{Error, Location, Result};
 pub use model::{
     ChannelInfo, ChannelRegression, DynamicModel, ParamInfo, RegressorModel, Sensitivities,

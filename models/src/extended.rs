@@ -209,8 +209,8 @@ struct Field {
     /// Whether dry friction is present (its tanh dominates the cost of a step).
     dry: bool,
     slip: [f64; 2],
-    /// Per-wheel effort clamp: (effort_max [m/s], κ [m]).
-    clamp: Option<(f64, f64)>,
+    /// Per-wheel efforts: (right gain, effort_max [m/s], κ [m]).
+    wheels: Option<(f64, f64, f64)>,
 }
 
 impl Field {
@@ -244,8 +244,9 @@ impl Field {
         let mut jf = [[0.0; 2]; 2];
         // ∂(clamped − unclamped effort)/∂u, for the command's sensitivities.
         let mut ju = [[0.0; 2]; 2];
-        if let Some((cl, kappa)) = self.clamp {
-            let (df, dj) = clamp_correction(cl, kappa, c.g, [u[0] - c.g * v, u[1] - c.g * w]);
+        if let Some((gain, cl, kappa)) = self.wheels {
+            let e = [u[0] - c.g * v, u[1] - c.g * w];
+            let (df, dj) = wheel_correction(gain, cl, kappa, c.g, e);
             fv += df[0];
             fw += df[1];
             for r in 0..2 {
@@ -299,17 +300,30 @@ impl Field {
     }
 }
 
-/// The per-wheel effort clamp's correction of eq. 2.19's efforts E = (E_v, E_ω) (module docs of
-/// `effects::EffortClamp`): Δ = (Ē_v − E_v, Ē_ω − E_ω) with the wheels' efforts E_v ± κ E_ω
-/// clamped to ±`cl`, and ∂Δ/∂(v, ω) for drive gain `g` (E = u − g (v, ω)).
+/// The per-wheel efforts' correction of eq. 2.19's efforts E = (E_v, E_ω)
+/// ([`wheelid_core::WheelTerms`]): Δ = (Ē_v − E_v, Ē_ω − E_ω) with the wheels' efforts
+/// E_v ± κ E_ω, the right one × `gain`, clamped to ±`cl`, and ∂Δ/∂(v, ω) for drive gain `g`
+/// (E = u − g (v, ω)).
 #[inline]
-fn clamp_correction(cl: f64, kappa: f64, g: f64, e: [f64; 2]) -> ([f64; 2], [[f64; 2]; 2]) {
-    let wheels = [e[0] + kappa * e[1], e[0] - kappa * e[1]];
+fn wheel_correction(
+    gain: f64,
+    cl: f64,
+    kappa: f64,
+    g: f64,
+    e: [f64; 2],
+) -> ([f64; 2], [[f64; 2]; 2]) {
+    let wheels = [gain * (e[0] + kappa * e[1]), e[0] - kappa * e[1]];
     let clamped = wheels.map(|x| x.clamp(-cl, cl));
     let ev = 0.5 * (clamped[0] + clamped[1]);
     let ew = (clamped[0] - clamped[1]) / (2.0 * kappa);
-    // 1 where a wheel's effort still follows its error, 0 where it is clamped.
-    let [fr, fl] = wheels.map(|x| if x.abs() < cl { 1.0 } else { 0.0 });
+    // Each wheel's slope on its own error: its gain where it follows, 0 where it is clamped.
+    let [fr, fl] = [0, 1].map(|i| {
+        if wheels[i].abs() < cl {
+            [gain, 1.0][i]
+        } else {
+            0.0
+        }
+    });
     let (sum, diff) = (0.5 * (fr + fl), 0.5 * (fr - fl));
     (
         [ev - e[0], ew - e[1]],
@@ -592,7 +606,9 @@ impl Extended {
             coulomb: ph.coulomb,
             dry,
             slip: ph.slip,
-            clamp: ph.clamp.map(|c| (c.effort_max, c.mix * 0.5 * self.track)),
+            wheels: ph
+                .wheels
+                .map(|w| (w.right_gain, w.effort_max, w.mix * 0.5 * self.track)),
         };
         // The rate-limited setpoint starts where it holds the initial state (a robot at rest
         // holds zero), as the simulator's.
@@ -805,6 +821,37 @@ mod tests {
         }
     }
 
+    /// A right wheel with effort gain a on a straight command u: the steady state solves
+    /// 0 = ((a+1)/2) E_v + ((a−1)/2) κ E_ω − (θ4 − 1) v and
+    /// 0 = ((a−1)/(2κ)) E_v + ((a+1)/2) E_ω − (θ6 − 1) ω, E_v = u − v, E_ω = −ω (θ3 = θ5 = 0):
+    /// inside the high-gain loop v stays near u/θ4 and the steady turn is small, the turn while
+    /// accelerating is not.
+    #[test]
+    fn amp_asymmetry_steady_state_solves_the_wheel_equations() {
+        let (a, track, u) = (0.8, 0.3, 0.5);
+        let kappa = track / 2.0;
+        let e = Extended::new(&[Candidate::AMP_ASYMMETRY], track).expect("model");
+        let mut th = THETA.to_vec();
+        th[2] = 0.0;
+        th[4] = 0.0;
+        th.push(a);
+        let rec = recording(false, 400, |_| (u, 0.0));
+        let [v, w] = <[Vec<f64>; 2]>::try_from(e.simulate(&th, &rec, &[0.0, 0.0]).expect("sim"))
+            .expect("two channels");
+        let (p, q) = ((a + 1.0) / 2.0, (a - 1.0) / 2.0);
+        // Rows in (v, ω): [p + θ4 − 1, q κ; q/κ, p + θ6 − 1] (v, ω) = (p u, q u/κ).
+        let m =
+            nalgebra::Matrix2::new(p + THETA[3] - 1.0, q * kappa, q / kappa, p + THETA[5] - 1.0);
+        let rhs = nalgebra::Vector2::new(p * u, q * u / kappa);
+        let x = m.lu().solve(&rhs).expect("regular");
+        approx::assert_abs_diff_eq!(v[399], x[0], epsilon = 1e-9);
+        approx::assert_abs_diff_eq!(w[399], x[1], epsilon = 1e-9);
+        // Inside the high-gain loop the static turn is small; the transient's is not.
+        let peak = w[..20].iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        assert!((v[399] - u / THETA[3]).abs() < 0.01 * u, "{}", v[399]);
+        assert!(peak > 5.0 * w[399].abs(), "{peak} vs {}", w[399]);
+    }
+
     #[test]
     fn analytic_sensitivities_match_central_differences_with_every_candidate() {
         // A rich command with a start at speed (the holding command matters before the first
@@ -825,6 +872,11 @@ mod tests {
             (vec![Candidate::SLIP], vec![0.05, 0.1]),
             (vec![Candidate::WHEEL_FRICTION], vec![0.03]),
             (vec![Candidate::EFFORT_CLAMP], vec![0.12, 1.3]),
+            (vec![Candidate::AMP_ASYMMETRY], vec![0.9]),
+            (
+                vec![Candidate::AMP_ASYMMETRY, Candidate::EFFORT_CLAMP],
+                vec![1.1, 0.12, 1.3],
+            ),
             (
                 vec![Candidate::GAIN_DRIFT, Candidate::EFFORT_CLAMP],
                 vec![-0.01, 0.12, 0.8],

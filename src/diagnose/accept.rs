@@ -25,6 +25,14 @@ pub(super) fn check_candidate(
     c.effect().plausible_together(&fit)
 }
 
+/// Akaike's criterion of an extended model on the validation blocks relative to the model in
+/// hand, n_eff ln(1 − drop) + 2k: `drop` the relative drop of the validation cost, k the
+/// parameters added, n_eff the validation samples discounted for the residual's
+/// autocorrelation ([`Data::effective_samples`]). Lower is better.
+pub(super) fn information(n_eff: f64, drop: f64, k: usize) -> f64 {
+    n_eff * (1.0 - drop).max(1e-12).ln() + 2.0 * k as f64
+}
+
 /// Why a fitted candidate is turned down.
 pub(super) struct Refusal {
     /// For the report.

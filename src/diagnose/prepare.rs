@@ -34,6 +34,34 @@ impl Data {
             weight: self.weight,
         }
     }
+    /// The validation samples of both channels discounted for the autocorrelation of the
+    /// residual `y − sim`: Σ_c n_c (1 − ρ_c)/(1 + ρ_c), ρ_c its lag-1 autocorrelation on
+    /// the validation blocks clamped to [0, 0.999] (the effective size of an AR(1) sample).
+    pub(super) fn effective_samples(&self, sim: &Outputs) -> f64 {
+        (0..2)
+            .map(|c| {
+                let (mut n, mut s0, mut s1) = (0usize, 0.0, 0.0);
+                for ((rec, m), out) in self.recs.iter().zip(&self.valid).zip(sim) {
+                    let y = if c == 0 { &rec.v } else { &rec.w };
+                    let e = |k: usize| y[k] - out[c][k];
+                    for k in (0..rec.len()).filter(|&k| m[k]) {
+                        n += 1;
+                        s0 += e(k) * e(k);
+                        if k > 0 && m[k - 1] {
+                            s1 += e(k) * e(k - 1);
+                        }
+                    }
+                }
+                let rho = if s0 > 0.0 {
+                    (s1 / s0).clamp(0.0, 0.999)
+                } else {
+                    0.0
+                };
+                n as f64 * (1.0 - rho) / (1.0 + rho)
+            })
+            .sum()
+    }
+
     /// Validation fits and cost of simulated outputs.
     pub(super) fn validate(&self, sim: &Outputs) -> (Channels, f64) {
         let mut y = [Vec::new(), Vec::new()];

@@ -205,18 +205,72 @@ fn first_accepted(
         q: &round.q,
         settings,
     };
+    // The first accepted and up to MORE_FITS after it compete on an information criterion
+    // over the validation blocks (a 5-parameter payload step may fit a 1-parameter gain drift's
+    // data a little better: it must be worth its parameters).
+    let n_eff = data.effective_samples(&cur.sim);
+    let mut best: Option<(f64, Accepted)> = None;
+    let mut more = 0;
     for (i, st) in ready {
+        if best.is_some() {
+            if more == MORE_FITS {
+                break;
+            }
+            more += 1;
+        }
         let c = round.nominees[i].pattern.candidate;
         progress.step(&format!("fitting {}", c.name()), 1);
         match fit_and_judge(&context, i, st) {
-            Ok(x) => return Some(x),
+            Ok(x) => {
+                let score = information(n_eff, x.3, free_params(c, &x.1));
+                match best.take() {
+                    Some((b, prev)) if b <= score => {
+                        rejected.push(outscored(c, score, &prev, b));
+                        best = Some((b, prev));
+                    }
+                    prev => {
+                        if let Some((b, prev)) = prev {
+                            let gone = round.nominees[prev.0].pattern.candidate;
+                            rejected.push(outscored(gone, b, &x, score));
+                        }
+                        best = Some((score, x));
+                    }
+                }
+            }
             Err(reason) => rejected.push(Rejected {
                 effect: c.name().into(),
                 reason,
             }),
         }
     }
-    None
+    best.map(|(_, x)| x)
+}
+
+/// A nominee accepted in a round: its index, the extended model, its validation fits and the
+/// relative drop of the validation cost.
+type Accepted = (usize, Current, Channels, f64);
+
+/// Fits tried after the first accepted one in a round ([`first_accepted`]).
+const MORE_FITS: usize = 2;
+
+/// The free parameters candidate `c` adds in `new` (the last of its candidates).
+fn free_params(c: Candidate, new: &Current) -> usize {
+    let base = new.theta.len() - c.params().len();
+    (base..new.theta.len())
+        .filter(|i| !new.pinned.contains(i))
+        .count()
+}
+
+/// The rejection of `c` (criterion `score`), outscored by `winner` (criterion `best`).
+fn outscored(c: Candidate, score: f64, winner: &Accepted, best: f64) -> Rejected {
+    Rejected {
+        effect: c.name().into(),
+        reason: format!(
+            "passes, but another candidate explains the validation blocks better for its \
+             parameters (information {score:.1} vs {best:.1}; validation cost −{:.1} %)",
+            100.0 * winner.3
+        ),
+    }
 }
 
 /// Most fits continued along a fingerprint that stays ([`Refusal::continue_from`]).

@@ -22,8 +22,8 @@
 //! and c = V_max/K_PT for the v/ω-PD loop. The derivative term's share of θ1, θ2 (which also
 //! vanishes while clamped) is taken as small.
 
-use wheelid_core::effect::{ClampTerms, FitData, Probe, ProbeData, Search, Terms, abs_quantile};
-use wheelid_core::{Effect, EffectChannels, ParamInfo, Recording, Result};
+use wheelid_core::effect::{FitData, Probe, ProbeData, Search, Terms, abs_quantile};
+use wheelid_core::{Effect, EffectChannels, ParamInfo, Recording, Result, WheelTerms};
 
 use super::{NEVER, limit_plausible};
 
@@ -131,10 +131,9 @@ impl Effect for EffortClamp {
         limit_plausible(&PARAMS[0], x, se, over(fit.recordings, half, x))
     }
     fn apply(&self, p: &[f64], terms: &mut Terms) -> Result<()> {
-        terms.clamp = Some(ClampTerms {
-            effort_max: p[0].abs(),
-            mix: p[1],
-        });
+        let w = terms.wheels.get_or_insert_with(WheelTerms::default);
+        w.effort_max = p[0].abs();
+        w.mix = p[1];
         Ok(())
     }
 }

@@ -4,6 +4,7 @@
 //! [`Candidate::new`] (its physics must fit the stages of [`wheelid_core::Terms`]).
 
 mod acceleration_limit;
+mod amp_asymmetry;
 mod coulomb_friction;
 mod effort_clamp;
 mod gain_drift;
@@ -18,6 +19,7 @@ use serde::{Deserialize, Deserializer, Serialize, Serializer};
 use wheelid_core::{Effect, ParamInfo};
 
 pub use acceleration_limit::{AccelerationLimit, slew_binding};
+pub use amp_asymmetry::AmpAsymmetry;
 pub use coulomb_friction::CoulombFriction;
 pub use effort_clamp::EffortClamp;
 pub use gain_drift::GainDrift;
@@ -29,7 +31,7 @@ pub use wheel_asymmetry::WheelAsymmetry;
 pub use wheel_friction::WheelFriction;
 
 /// The registry: every built-in effect, in the order the diagnosis reports them.
-pub static EFFECTS: [&dyn Effect; 10] = [
+pub static EFFECTS: [&dyn Effect; 11] = [
     &InputDelay,
     &AccelerationLimit,
     &VelocitySaturation,
@@ -40,6 +42,7 @@ pub static EFFECTS: [&dyn Effect; 10] = [
     &Slip,
     &WheelFriction,
     &EffortClamp,
+    &AmpAsymmetry,
 ];
 
 /// A value far beyond any command: a limit at this level never binds (a limit's null).
@@ -99,6 +102,8 @@ impl Candidate {
     pub const WHEEL_FRICTION: Candidate = Candidate(&WheelFriction);
     /// Per-wheel effort clamp ([`EffortClamp`]).
     pub const EFFORT_CLAMP: Candidate = Candidate(&EffortClamp);
+    /// Right/left effort gain mismatch ([`AmpAsymmetry`]).
+    pub const AMP_ASYMMETRY: Candidate = Candidate(&AmpAsymmetry);
 
     /// A candidate for any effect (a built-in one of [`EFFECTS`] or the caller's own).
     pub fn new(effect: &'static dyn Effect) -> Self {
