@@ -12,16 +12,20 @@
 //!    independence (cross-correlation at lags −L…L with Ljung's bounds,
 //!    `wheelid_core::residual`), free-run fit %; on the training blocks: each candidate's
 //!    fingerprint, a score test of its pattern ([`score`]; a limit probed at three fractions of
-//!    the level read off the data, a payload change at five times, Bonferroni for each grid). A mismatch is declared only on
-//!    tests that survive Holm's correction over the whole family (independence and
-//!    fingerprints), never on whiteness alone;
+//!    the level read off the data, a payload change at five times, Bonferroni for each grid).
+//!    A mismatch is declared on tests that survive Holm's correction over the whole family
+//!    (independence and fingerprints), or where a channel's validation residual is more than
+//!    [`NOISE_FLOOR_FACTOR`] times its measurement noise floor, and only where some channel's
+//!    validation fit is below [`PRACTICAL_FIT_PERCENT`]; never on whiteness alone;
 //! 3. **locate** — per channel, the residual by lag, frequency band, operating region and time
 //!    window ([`locate`]);
-//! 4. **name** — the candidates whose fingerprint survives the correction are nominated, the
-//!    strongest first: `input_delay`, `acceleration_limit`, `velocity_saturation`,
-//!    `coulomb_friction`, `wheel_asymmetry`, `payload_change`, `gain_drift`, `slip`
-//!    (`wheelid_models::Candidate`). A two-channel candidate acts on the channels whose own
-//!    pattern is significant; the other channel's parameter is held at its null;
+//! 4. **name** — the candidates whose fingerprint survives the correction are nominated (when
+//!    none does but a residual is above the noise floor: those significant on their own), the
+//!    strongest first — every effect of `wheelid_models::effects::EFFECTS` (`input_delay`,
+//!    `acceleration_limit`, `velocity_saturation`, `coulomb_friction`, `wheel_asymmetry`,
+//!    `payload_change`, `gain_drift`, `slip`, `wheel_friction`, `effort_clamp`,
+//!    `amp_asymmetry`). A two-channel candidate acts on the channels whose own pattern is
+//!    significant; the other channel's parameter is held at its null;
 //! 5. **model and accept** — the extended model is fitted by output error; the candidate is
 //!    kept only if the validation cost Σ_c Σ_k e²/σ_c² drops by at least
 //!    [`DiagnoseSettings::min_improvement`] with no channel's validation fit falling by more
@@ -31,10 +35,13 @@
 //!    residual or is at least halved — for an effect smooth in its parameter this nearly
 //!    follows from the fit; it bites for the limits, whose pattern is a probe at a level read
 //!    off the data, and for a candidate standing in for another effect; the validation cost
-//!    is the main guard). Then the search starts
-//!    again from the extended model (forward selection, at most
-//!    [`DiagnoseSettings::max_effects`]). What stays significant is reported as
-//!    [`Unexplained`], with where it lives;
+//!    is the main guard). The first candidate that passes and up to two more compete on
+//!    Akaike's criterion over the validation blocks, n_eff ln(J₁/J₀) + 2k, n_eff discounted for
+//!    the residual's lag-1 autocorrelation. Then the search starts again from the extended
+//!    model (forward selection, at most [`DiagnoseSettings::max_effects`], until every channel
+//!    is practically fitted). What stays significant or above the noise floor in a channel
+//!    fitted below [`PRACTICAL_FIT_PERCENT`], and any channel below [`LOW_FIT_PERCENT`], is
+//!    reported as [`Unexplained`], with where it lives;
 //! 6. **show** — before/after fit % per channel on the validation blocks
 //!    (`crate::report::diagnosis_text`, `crate::plot::write_diagnosis_plots`, JSON).
 

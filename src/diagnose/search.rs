@@ -75,9 +75,14 @@ fn test_round(
     let decisions = holm(&p_values, alpha);
     let mut nominated = decisions[4..].to_vec();
     // A residual well above the noise floor is a mismatch whatever the family says: then the
-    // fingerprints significant on their own are fitted (validation evidence still decides).
+    // FLOOR_NOMINEES fingerprints with the smallest p-values are fitted (validation evidence
+    // and the information criterion still decide).
     if above_floor(data, cur).iter().any(|&a| a) && !nominated.iter().any(|&d| d) {
-        nominated = nominees.iter().map(|n| n.p_value < alpha).collect();
+        let mut by_p: Vec<usize> = (0..nominees.len()).collect();
+        by_p.sort_by(|&a, &b| nominees[a].p_value.total_cmp(&nominees[b].p_value));
+        for &i in by_p.iter().take(FLOOR_NOMINEES) {
+            nominated[i] = nominees[i].p_value < 0.5;
+        }
     }
     Some(Round {
         nominated,
@@ -98,6 +103,9 @@ pub(super) fn above_floor(data: &Data, cur: &Current) -> [bool; 2] {
             && c.noise_ratio > NOISE_FLOOR_FACTOR
     })
 }
+
+/// Fingerprints fitted when only the noise floor shows a mismatch ([`test_round`]).
+const FLOOR_NOMINEES: usize = 3;
 
 /// The first round's family as the report lists it.
 fn family(round: &Round) -> Vec<TestResult> {
