@@ -275,7 +275,7 @@ fn outscored(c: Candidate, score: f64, winner: &Accepted, best: f64) -> Rejected
         effect: c.name().into(),
         reason: format!(
             "passes, but another candidate explains the validation blocks better for its \
-             parameters (information {score:.1} vs {best:.1}; validation cost −{:.1} %)",
+             parameters (information {score:.2} vs {best:.2}; validation cost −{:.1} %)",
             100.0 * winner.3
         ),
     }
