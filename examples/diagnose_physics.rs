@@ -125,6 +125,8 @@ pub struct RunSpec {
     pub duration_s: f64,
     /// Host timing jitter (fraction of the period).
     pub jitter: f64,
+    /// Diagnosis candidates by name (`None`: every registered one).
+    pub candidates: Option<Vec<String>>,
 }
 
 impl RunSpec {
@@ -732,10 +734,19 @@ fn run_into(spec: &RunSpec, cache: &CleanRuns, rec: &mut Record) -> Result<()> {
         .with_context(|| format!("no model {}", p.model_name()))?;
     // Default settings; the track is the d the host converted ω with (the metadata's `robot`
     // would look up the simulator's profile of the same name, whose track may differ).
-    let ds = DiagnoseSettings {
+    let mut ds = DiagnoseSettings {
         track_m: Some(p.d),
         ..DiagnoseSettings::default()
     };
+    if let Some(names) = &spec.candidates {
+        ds.candidates = names
+            .iter()
+            .map(|n| {
+                wheelid::models::Candidate::by_name(n)
+                    .with_context(|| format!("--candidates {n}: unknown"))
+            })
+            .collect::<Result<_>>()?;
+    }
     let clock = Instant::now();
     let d = diagnose(&[recording], model.as_ref(), &ds)?;
     rec.diagnose_s = clock.elapsed().as_secs_f64();
@@ -1246,6 +1257,10 @@ pub struct Args {
     /// Runs at once.
     #[arg(long, default_value_t = 1)]
     pub threads: usize,
+    /// Diagnosis candidates, comma-separated (default: every registered one) — for looking
+    /// at what one candidate does on a case, not for the reported figures.
+    #[arg(long, value_delimiter = ',')]
+    pub candidates: Option<Vec<String>>,
 }
 
 /// The runs `a` asks for: profile × convention × case × seed.
@@ -1290,6 +1305,7 @@ pub fn plan(a: &Args) -> Result<Vec<RunSpec>> {
                         seed,
                         duration_s: a.duration.unwrap_or_else(|| default_duration(profile)),
                         jitter: a.jitter,
+                        candidates: a.candidates.clone(),
                     });
                 }
             }

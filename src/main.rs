@@ -531,7 +531,7 @@ struct DiagnoseArgs {
     /// Model parameterization of the least-squares start.
     #[arg(long, value_parser = models::MODEL_NAMES)]
     model: Option<String>,
-    /// Candidates to search, comma-separated (default: all eight).
+    /// Candidates to search, comma-separated (default: every registered one).
     #[arg(long, value_delimiter = ',', value_parser = clap::builder::PossibleValuesParser::new(models::Candidate::names()))]
     candidates: Option<Vec<String>>,
     /// Most effects added.

@@ -296,7 +296,7 @@ pub fn diagnosis_text(d: &Diagnosis) -> String {
             .iter()
             .zip(&d.nominal.std_err)
             .zip(names)
-            .map(|((t, e), n)| format!("{n} {t:.4}±{e:.4}"))
+            .map(|((t, e), n)| format!("{n} {}", estimate(*t, *e, "±")))
             .collect::<Vec<_>>()
             .join(", ")
     );
@@ -416,10 +416,8 @@ pub fn diagnosis_text(d: &Diagnosis) -> String {
             .parameters
             .iter()
             .map(|(k, v)| {
-                format!(
-                    "{k} = {v:.4} ± {:.4}",
-                    f.std_err.get(k).copied().unwrap_or(0.0)
-                )
+                let e = f.std_err.get(k).copied().unwrap_or(0.0);
+                format!("{k} = {}", estimate(*v, e, " ± "))
             })
             .collect();
         let _ = writeln!(
@@ -460,10 +458,33 @@ pub fn diagnosis_text(d: &Diagnosis) -> String {
             .names
             .iter()
             .zip(f.theta.iter().zip(&f.std_err))
-            .map(|(n, (x, e))| format!("{n} {x:.4}±{e:.4}"))
+            .map(|(n, (x, e))| format!("{n} {}", estimate(*x, *e, "±")))
             .collect();
         let _ = writeln!(s, "   refitted: {}", params.join(", "));
     }
     let _ = writeln!(s, "   ({:.2} s)", d.seconds);
     s
+}
+
+/// `x ± e` with at least 4 decimals and enough for the standard error's two leading digits
+/// (a fit on nearly noiseless data has errors of 10⁻⁷: printed so, never as `± 0.0000`).
+fn estimate(x: f64, e: f64, sep: &str) -> String {
+    let decimals = if e > 0.0 && e.is_finite() {
+        ((1.0 - e.log10()).ceil() as usize).clamp(4, 10)
+    } else {
+        4
+    };
+    format!("{x:.decimals$}{sep}{e:.decimals$}")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::estimate;
+
+    #[test]
+    fn estimates_keep_two_digits_of_a_tiny_standard_error() {
+        assert_eq!(estimate(0.045_177_35, 3.0e-7, "±"), "0.04517735±0.00000030");
+        assert_eq!(estimate(0.0379, 0.0010, " ± "), "0.0379 ± 0.0010");
+        assert_eq!(estimate(1.0042, 0.0, "±"), "1.0042±0.0000");
+    }
 }
