@@ -87,9 +87,15 @@ pub(super) fn verdict(
     let (after, cost) = data.validate(&new.sim);
     let drop = 1.0 - cost / cost_before;
     if drop < settings.min_improvement {
+        let change = if drop > 0.0 {
+            format!("drops by {:.1} % only", 100.0 * drop)
+        } else {
+            // -0.0 % reads as a typo: a cost that does not fall "rises by 0.0 %".
+            let rise = -100.0 * drop;
+            format!("rises by {:.1} %", if rise > 0.0 { rise } else { 0.0 })
+        };
         return Err(Refusal::from(format!(
-            "the validation cost drops by {:.1} % only (< {:.0} %)",
-            100.0 * drop,
+            "the validation cost {change} (< {:.0} % drop)",
             100.0 * settings.min_improvement
         )));
     }

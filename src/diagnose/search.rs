@@ -74,12 +74,27 @@ fn test_round(
     p_values.extend(nominees.iter().map(|n| n.p_value));
     let decisions = holm(&p_values, alpha);
     let mut nominated = decisions[4..].to_vec();
-    // A residual well above the noise floor is a mismatch whatever the family says: then the
-    // FLOOR_NOMINEES fingerprints with the smallest p-values are fitted (validation evidence
-    // and the information criterion still decide).
-    if above_floor(data, cur).iter().any(|&a| a) && !nominated.iter().any(|&d| d) {
-        let mut by_p: Vec<usize> = (0..nominees.len()).collect();
-        by_p.sort_by(|&a, &b| nominees[a].p_value.total_cmp(&nominees[b].p_value));
+    let mut by_p: Vec<usize> = (0..nominees.len()).collect();
+    by_p.sort_by(|&a, &b| nominees[a].p_value.total_cmp(&nominees[b].p_value));
+    if nominated.iter().any(|&d| d) {
+        // The mismatch is established: Holm's correction guards that decision, not the choice
+        // among explanations. Fingerprints significant on their own (p < α) join the
+        // nominees, up to FLOOR_NOMINEES in all (a payload step whose fingerprint is weaker
+        // than a gain drift's may still explain the data far better).
+        let mut count = nominated.iter().filter(|&&d| d).count();
+        for &i in &by_p {
+            if count >= FLOOR_NOMINEES {
+                break;
+            }
+            if !nominated[i] && nominees[i].p_value < alpha {
+                nominated[i] = true;
+                count += 1;
+            }
+        }
+    } else if above_floor(data, cur).iter().any(|&a| a) {
+        // A residual well above the noise floor is a mismatch whatever the family says: then
+        // the FLOOR_NOMINEES fingerprints with the smallest p-values are fitted (validation
+        // evidence and the information criterion still decide).
         for &i in by_p.iter().take(FLOOR_NOMINEES) {
             nominated[i] = nominees[i].p_value < 0.5;
         }
