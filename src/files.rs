@@ -36,6 +36,8 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 use wheelid_models::{Parameterization, VwPdMap, WheelPdMap};
 
+use wheelid_core::Recording;
+
 use crate::identify::Identification;
 
 /// Per-channel quality in the model file.
@@ -54,6 +56,10 @@ pub struct ChannelQuality {
 pub struct ModelFile {
     /// Model name (`wheel-pd`, `vw-pd`).
     pub model: String,
+    /// The robot it was identified on (the recordings' `# robot:`, or the built-in profile's
+    /// name); using the model on another robot is a warning (`wheelid migrate`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub robot: Option<String>,
     /// Estimator that gave θ (`ls`, `iv`, `oe`); absent in files written before estimators.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub estimator: Option<String>,
@@ -79,10 +85,22 @@ pub struct ModelFile {
 }
 
 impl ModelFile {
+    /// Records the robot the `recordings` came from: their `# robot:` when they all state the
+    /// same one, else `fallback` (a built-in profile's name), else none.
+    #[must_use]
+    pub fn on_robot_of(mut self, recordings: &[Recording], fallback: Option<&str>) -> Self {
+        let mut names = recordings.iter().map(|r| r.meta("robot"));
+        let first = names.next().flatten();
+        let same = first.is_some() && names.all(|n| n == first);
+        self.robot = if same { first } else { fallback }.map(str::to_owned);
+        self
+    }
+
     /// The file content of an identification.
     pub fn from_identification(id: &Identification) -> Self {
         Self {
             model: id.model.clone(),
+            robot: None,
             estimator: Some(id.estimator.name().to_owned()),
             theta: id.theta.clone(),
             std_err: id.std_err.clone(),
@@ -118,6 +136,7 @@ impl ModelFile {
         };
         Self {
             model: model.to_owned(),
+            robot: None,
             estimator: Some("oe".into()),
             theta: stage.theta[..6].to_vec(),
             std_err: stage.std_err[..6].to_vec(),

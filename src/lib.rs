@@ -14,7 +14,7 @@
 //! * this crate: the identification run ([`identify`]), its files ([`files`]), reports
 //!   ([`report`]) and plots ([`plot`]); the stamping convention, stated or estimated
 //!   ([`timing`]); config-driven runs ([`run`]) and external plugins
-//!   ([`plugins`]).
+//!   ([`plugins`]); controller migration between robots ([`migrate`]).
 //!
 //! ```
 //! use wheelid::{identify::{identify, IdentifySettings}, models::VwPd, solvers::Ols};
@@ -31,6 +31,7 @@ pub mod config;
 pub mod diagnose;
 pub mod files;
 pub mod identify;
+pub mod migrate;
 pub mod plot;
 pub mod plugins;
 pub mod report;

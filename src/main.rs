@@ -48,6 +48,42 @@ enum Command {
     /// ch. 3–4) on a simulated robot (eq. 2.19, or the rigid-body robot with `--backend
     /// physics`); reports the distance error.
     Track(TrackArgs),
+    /// Move a tracking controller from one robot to another (thesis ch. 3–4): θ̂ and the
+    /// projection bounds from the target's model, gains, γ and the figure eight scaled to the
+    /// target, every choice with its reason; then track the migrated figure eight on the
+    /// target's simulation with the controller as it was and as migrated. With no model
+    /// files: the built-in Khepera III's controller moved to the built-in Pioneer 3-DX.
+    Migrate(MigrateArgs),
+}
+
+#[derive(clap::Args)]
+struct MigrateArgs {
+    /// The controller as tuned on the source (TOML, as `--out` writes it); default: the
+    /// source's figure eight, default gains, θ̂ = the source's θ, θ1, θ2, θ3, θ5 adapting.
+    #[arg(long)]
+    controller: Option<PathBuf>,
+    /// The source robot's model (TOML from `identify --out` or `diagnose --out`).
+    #[arg(long, requires = "to")]
+    from: Option<PathBuf>,
+    /// The target robot's model.
+    #[arg(long, requires = "from")]
+    to: Option<PathBuf>,
+    /// Built-in profile of the source robot (its period and limits), when the model file
+    /// does not name one (simulator profiles: pioneer3dx, pioneer3dx_laut, khepera3).
+    #[arg(long)]
+    from_robot: Option<String>,
+    /// Built-in profile of the target robot.
+    #[arg(long)]
+    to_robot: Option<String>,
+    /// Write the migrated controller (TOML; `wheelid track --controller` runs it).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Tracking time on the target [s].
+    #[arg(long, default_value_t = 90.0)]
+    duration: f64,
+    /// Print the report as JSON.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(clap::Args)]
@@ -108,6 +144,11 @@ struct TrackArgs {
     /// [track.simulation.effects.*]); the flags below override it.
     #[arg(long)]
     config: Option<PathBuf>,
+    /// A controller description (TOML from `wheelid migrate --out`): its gains, γ, bounds,
+    /// θ̂(0) and trajectory replace the config's `[track]` ones; its robot is the default
+    /// `--robot`. The flags below still override it.
+    #[arg(long)]
+    controller: Option<PathBuf>,
     /// Built-in robot (simulator: pioneer3dx, pioneer3dx_laut, khepera3; physics: pioneer3dx,
     /// khepera3, burger).
     #[arg(long)]
@@ -293,7 +334,11 @@ fn run_simulate(a: SimulateArgs) -> Result<()> {
 }
 
 fn run_track(a: TrackArgs) -> Result<()> {
-    let (cfg, base): (TrackConfig, PathBuf) = read_toml_or_default(a.config.as_deref())?;
+    let (mut cfg, base): (TrackConfig, PathBuf) = read_toml_or_default(a.config.as_deref())?;
+    if let Some(path) = &a.controller {
+        let c = wheelid::migrate::read_controller(path)?;
+        cfg.robot = c.robot.or(cfg.robot);
+    }
     let physics = a.backend == "physics";
     let robot = if physics {
         physical_profile(a.robot.as_deref().or(cfg.robot.as_deref()))?.model_profile()
@@ -365,6 +410,12 @@ fn track_settings(
     robot: &RobotProfile,
 ) -> Result<wheelid::robots::TrackSettings> {
     let mut s = cfg.track.clone();
+    if let Some(path) = &a.controller {
+        let c = wheelid::migrate::read_controller(path)?;
+        let d = s.duration_s;
+        s = c.track_settings(d);
+        s.simulation = cfg.track.simulation.clone();
+    }
     let model = a
         .model
         .clone()
@@ -500,7 +551,10 @@ fn run_identify(a: IdentifyArgs) -> Result<()> {
         print!("{}", report::to_text(&id, truth.as_deref()));
     }
     if let Some(out) = &a.out {
-        ModelFile::from_identification(&id).write(out)?;
+        let fallback = a.files.is_empty().then_some("pioneer3dx");
+        ModelFile::from_identification(&id)
+            .on_robot_of(&recordings, fallback)
+            .write(out)?;
         if !a.json {
             println!("identified model written to {}", out.display());
         }
@@ -608,7 +662,10 @@ fn run_diagnose(a: DiagnoseArgs) -> Result<()> {
     }
     if let Some(out) = &a.out {
         let name = name.as_deref().unwrap_or("vw-pd");
-        ModelFile::from_diagnosis(&d, name).write(out)?;
+        let fallback = files.is_empty().then_some("pioneer3dx");
+        ModelFile::from_diagnosis(&d, name)
+            .on_robot_of(&recordings, fallback)
+            .write(out)?;
         if !a.json {
             println!("written: {}", out.display());
         }
@@ -681,6 +738,77 @@ fn builtin_diagnosis_recording(seed: u64) -> Result<(Recording, String)> {
     ))
 }
 
+/// The built-in profile for a model file: `flag`, else the file's robot.
+fn profile_of(flag: Option<&str>, file: &ModelFile, which: &str) -> Result<RobotProfile> {
+    let name = flag.or(file.robot.as_deref()).with_context(|| {
+        format!(
+            "the {which} model names no robot: give --{which}-robot (one of {})",
+            RobotProfile::NAMES.join(", ")
+        )
+    })?;
+    RobotProfile::by_name(name).with_context(|| {
+        format!(
+            "the {which} robot `{name}` has no built-in profile for its period and limits: give --{which}-robot (one of {})",
+            RobotProfile::NAMES.join(", ")
+        )
+    })
+}
+
+fn run_migrate(a: MigrateArgs) -> Result<()> {
+    use wheelid::migrate::{migrate_on_simulator, migration_text, robot_model};
+    use wheelid::robots::migrate::{ControllerSpec, RobotModel};
+    let (from, to, from_p, mut to_p) = match (&a.from, &a.to) {
+        (Some(f), Some(t)) => {
+            let (ff, tf) = (ModelFile::read(f)?, ModelFile::read(t)?);
+            let fp = profile_of(a.from_robot.as_deref(), &ff, "from")?;
+            let tp = profile_of(a.to_robot.as_deref(), &tf, "to")?;
+            let fm = robot_model(&ff, &fp).with_context(|| f.display().to_string())?;
+            let tm = robot_model(&tf, &tp).with_context(|| t.display().to_string())?;
+            (fm, tm, fp, tp)
+        }
+        _ => {
+            let (fp, tp) = (RobotProfile::khepera3(), RobotProfile::pioneer3dx());
+            if !a.json {
+                println!(
+                    "No model files: the built-in Khepera III's controller moved to the built-in \
+                     Pioneer 3-DX (their thesis θ taken as identified models).\n"
+                );
+            }
+            (
+                RobotModel::from_profile(&fp),
+                RobotModel::from_profile(&tp),
+                fp,
+                tp,
+            )
+        }
+    };
+    let ctrl = match &a.controller {
+        Some(p) => wheelid::migrate::read_controller(p)?,
+        None => ControllerSpec::tuned_on(&from, &from_p)?,
+    };
+    // The target's simulation runs the target model's θ.
+    if let Some(th) = to.theta {
+        to_p.theta = th;
+    }
+    let m = migrate_on_simulator(&ctrl, &from, &to, &to_p, a.duration, false)?;
+    if let Some(out) = &a.out {
+        wheelid::migrate::write_controller(out, &m.migrated.controller)?;
+    }
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&m)?);
+    } else {
+        let plant = format!(
+            "{} (eq.-2.19 simulation with the target model's θ, {} s)",
+            to.robot, a.duration
+        );
+        print!("{}", migration_text(&m, &from.robot, &to.robot, &plant));
+        if let Some(out) = &a.out {
+            println!("migrated controller written to {}", out.display());
+        }
+    }
+    Ok(())
+}
+
 fn main() -> Result<()> {
     match Cli::parse().command {
         Command::Diagnose(a) => run_diagnose(a),
@@ -688,5 +816,6 @@ fn main() -> Result<()> {
         Command::Run(a) => run_run(a),
         Command::Simulate(a) => run_simulate(a),
         Command::Track(a) => run_track(a),
+        Command::Migrate(a) => run_migrate(a),
     }
 }

@@ -607,7 +607,9 @@ pub fn run(path: &Path, progress: bool) -> Result<RunOutput> {
         dir.join("report.json"),
     ];
     recording.write_csv(&files[0])?;
-    ModelFile::from_identification(&identification).write(&files[1])?;
+    ModelFile::from_identification(&identification)
+        .on_robot_of(std::slice::from_ref(&recording), None)
+        .write(&files[1])?;
     let write = |p: &Path, s: String| {
         wheelid_core::recording::write_atomic(p, s.as_bytes())
             .with_context(|| format!("writing {}", p.display()))
