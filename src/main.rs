@@ -790,7 +790,11 @@ fn run_migrate(a: MigrateArgs) -> Result<()> {
     if let Some(th) = to.theta {
         to_p.theta = th;
     }
-    let m = migrate_on_simulator(&ctrl, &from, &to, &to_p, a.duration, false)?;
+    let check = wheelid::migrate::CheckSettings {
+        duration_s: a.duration,
+        ..Default::default()
+    };
+    let m = migrate_on_simulator(&ctrl, &from, &to, &to_p, &check)?;
     if let Some(out) = &a.out {
         wheelid::migrate::write_controller(out, &m.migrated.controller)?;
     }

@@ -6,10 +6,10 @@
 //! the controllers, not the paths. "As it was" keeps the source's gains, γ, bounds and θ̂(0).
 
 use serde::Serialize;
-use wheelid_core::{Error, Result};
+use wheelid_core::{Error, Result, Robot};
 use wheelid_robots::migrate::{ControllerSpec, Migrated, RobotModel, migrate};
 use wheelid_robots::tracking::ErrorSummary;
-use wheelid_robots::{RobotProfile, TrackResult, track};
+use wheelid_robots::{RobotProfile, SimSettings, TrackResult, TrackSettings, track, track_robot};
 
 use crate::files::ModelFile;
 
@@ -79,10 +79,61 @@ pub struct Migration {
     pub runs: Vec<Run>,
 }
 
-/// Migrates `ctrl` from `from` to `to` and tracks the migrated path for `duration_s` on the
-/// eq.-2.19 simulation of `target` (its θ is the plant; `settings` seed and noise as
-/// [`wheelid_robots::TrackSettings::default`]) with the controller as it was and as migrated,
-/// and with θ̂(0) and bounds from `target.theta` when `with_truth`.
+/// How the migrated controller is checked on the target.
+#[derive(Debug, Clone)]
+pub struct CheckSettings {
+    /// Tracking time [s].
+    pub duration_s: f64,
+    /// Also run the controller set up with the target's true θ (known in simulation).
+    pub with_truth: bool,
+    /// The simulated target's settings (seed, encoders, effects such as a payload);
+    /// `duration_s` there is ignored. Not used on a [`Robot`](wheelid_core::Robot) backend.
+    pub simulation: SimSettings,
+}
+
+impl Default for CheckSettings {
+    /// 90 s, no true-θ run, the simulator's defaults.
+    fn default() -> Self {
+        Self {
+            duration_s: 90.0,
+            with_truth: false,
+            simulation: SimSettings::default(),
+        }
+    }
+}
+
+/// The runs of a check: as it was (the migrated path), migrated, and with the true θ
+/// (`truth`), each through `run`.
+fn check(
+    ctrl: &ControllerSpec,
+    from: &RobotModel,
+    migrated: Migrated,
+    truth: Option<RobotModel>,
+    duration_s: f64,
+    run: &mut dyn FnMut(&TrackSettings) -> Result<TrackResult>,
+) -> Result<Migration> {
+    let mut as_was = ctrl.track_settings(duration_s);
+    as_was.trajectory = Some(migrated.controller.trajectory);
+    let mut runs = vec![
+        Run::of("as it was", &run(&as_was)?),
+        Run::of(
+            "migrated",
+            &run(&migrated.controller.track_settings(duration_s))?,
+        ),
+    ];
+    if let Some(truth) = truth {
+        let reference = migrate(ctrl, from, &truth)?;
+        runs.push(Run::of(
+            "target's true θ",
+            &run(&reference.controller.track_settings(duration_s))?,
+        ));
+    }
+    Ok(Migration { migrated, runs })
+}
+
+/// Migrates `ctrl` from `from` to `to` and tracks the migrated path on the eq.-2.19
+/// simulation of `target` (its θ is the plant) with the controller as it was and as migrated,
+/// and with θ̂(0) and bounds from `target.theta` when `check.with_truth`.
 ///
 /// # Errors
 /// As [`migrate`] and [`track`] (a diverging run is an error naming the time).
@@ -91,30 +142,51 @@ pub fn migrate_on_simulator(
     from: &RobotModel,
     to: &RobotModel,
     target: &RobotProfile,
-    duration_s: f64,
-    with_truth: bool,
+    settings: &CheckSettings,
 ) -> Result<Migration> {
     let migrated = migrate(ctrl, from, to)?;
-    let path = migrated.controller.trajectory;
-    let mut as_was = ctrl.track_settings(duration_s);
-    as_was.trajectory = Some(path);
-    let mut runs = vec![
-        Run::of("as it was", &track(target, &as_was)?),
-        Run::of(
-            "migrated",
-            &track(target, &migrated.controller.track_settings(duration_s))?,
-        ),
-    ];
-    if with_truth {
-        let mut truth = RobotModel::from_profile(target);
-        truth.robot = to.robot.clone();
-        let reference = migrate(ctrl, from, &truth)?;
-        runs.push(Run::of(
-            "target's true θ",
-            &track(target, &reference.controller.track_settings(duration_s))?,
-        ));
-    }
-    Ok(Migration { migrated, runs })
+    let truth = settings.with_truth.then(|| {
+        let mut t = RobotModel::from_profile(target);
+        t.robot = to.robot.clone();
+        t
+    });
+    let mut run = |s: &TrackSettings| {
+        let mut s = s.clone();
+        s.simulation = settings.simulation.clone();
+        track(target, &s)
+    };
+    check(ctrl, from, migrated, truth, settings.duration_s, &mut run)
+}
+
+/// As [`migrate_on_simulator`], on any robot backend: `make` gives a fresh robot at rest for
+/// each run (the physics robot, a loopback or real robot, a plugin's); commands are clipped to
+/// the target model's ±(v_max, ω_max). `truth`: the target's true θ where the backend knows it
+/// (the physics robot's map), for the third run.
+///
+/// # Errors
+/// As [`migrate`] and [`track_robot`]; errors of `make`.
+pub fn migrate_on_robot(
+    ctrl: &ControllerSpec,
+    from: &RobotModel,
+    to: &RobotModel,
+    make: &mut dyn FnMut() -> Result<Box<dyn Robot>>,
+    truth: Option<[f64; 6]>,
+    duration_s: f64,
+) -> Result<Migration> {
+    let migrated = migrate(ctrl, from, to)?;
+    let truth = truth.map(|th| RobotModel {
+        theta: Some(th),
+        std_err: None,
+        bounds: None,
+        ..to.clone()
+    });
+    let limits = [to.v_max, to.w_max];
+    let mut run = |s: &TrackSettings| {
+        let mut robot = make()?;
+        let path = s.trajectory.unwrap_or(migrated.controller.trajectory);
+        track_robot(robot.as_mut(), &path, s, limits)
+    };
+    check(ctrl, from, migrated.clone(), truth, duration_s, &mut run)
 }
 
 /// Reads a controller description (TOML: `robot`, `theta_hat0`, `[kinematic]` k1 k2 k3,
