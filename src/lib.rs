@@ -14,7 +14,8 @@
 //! * this crate: the identification run ([`identify`]), its files ([`files`]), reports
 //!   ([`report`]) and plots ([`plot`]); the stamping convention, stated or estimated
 //!   ([`timing`]); config-driven runs ([`run`]) and external plugins
-//!   ([`plugins`]); controller migration between robots ([`migrate`]).
+//!   ([`plugins`]); controller migration between robots ([`migrate`]); the ROS 2 hand-off
+//!   ([`export`]).
 //!
 //! ```
 //! use wheelid::{identify::{identify, IdentifySettings}, models::VwPd, solvers::Ols};
@@ -29,6 +30,7 @@
 
 pub mod config;
 pub mod diagnose;
+pub mod export;
 pub mod files;
 pub mod identify;
 pub mod migrate;

@@ -54,6 +54,26 @@ enum Command {
     /// target's simulation with the controller as it was and as migrated. With no model
     /// files: the built-in Khepera III's controller moved to the built-in Pioneer 3-DX.
     Migrate(MigrateArgs),
+    /// Export a model file for another stack: `--format ros2` writes the YAML parameters of
+    /// ROS 2's diff_drive_controller and Nav2's MPPI controller (limits found by diagnosis,
+    /// wheel geometry of the built-in profile) and the response lag.
+    Export(ExportArgs),
+}
+
+#[derive(clap::Args)]
+struct ExportArgs {
+    /// The model file (from `identify --out` or `diagnose --out`).
+    model: PathBuf,
+    /// Output format.
+    #[arg(long, value_parser = ["ros2"], default_value = "ros2")]
+    format: String,
+    /// Built-in profile for the wheel geometry and top speeds (default: the model's robot,
+    /// if it has one).
+    #[arg(long)]
+    robot: Option<String>,
+    /// Write to this file (default: standard output).
+    #[arg(short, long)]
+    out: Option<PathBuf>,
 }
 
 #[derive(clap::Args)]
@@ -81,6 +101,14 @@ struct MigrateArgs {
     /// Tracking time on the target [s].
     #[arg(long, default_value_t = 90.0)]
     duration: f64,
+    /// Where the target runs: `simulator` (eq. 2.19 with the target model's θ) or `physics`
+    /// (the rigid-body robot of the target's name: pioneer3dx, khepera3, burger; the θ its
+    /// constants map to is the third run's).
+    #[arg(long, value_parser = ["simulator", "physics"], default_value = "simulator")]
+    backend: String,
+    /// Seed of the target robot's noise.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
     /// Print the report as JSON.
     #[arg(long)]
     json: bool,
@@ -790,25 +818,72 @@ fn run_migrate(a: MigrateArgs) -> Result<()> {
     if let Some(th) = to.theta {
         to_p.theta = th;
     }
-    let check = wheelid::migrate::CheckSettings {
-        duration_s: a.duration,
-        ..Default::default()
+    let (m, plant) = if a.backend == "physics" {
+        let pp = physical_profile(Some(&to.robot))?;
+        let ps = wheelid::robots::physics::PhysicsSettings {
+            duration_s: a.duration + 5.0,
+            seed: a.seed,
+            ..Default::default()
+        };
+        let mut make = || -> wheelid::core::Result<Box<dyn wheelid::core::Robot>> {
+            Ok(Box::new(wheelid::robots::physics::PhysicsRobot::new(
+                &pp, &ps,
+            )?))
+        };
+        let m = wheelid::migrate::migrate_on_robot(
+            &ctrl,
+            &from,
+            &to,
+            &mut make,
+            Some(pp.theta()),
+            a.duration,
+        )?;
+        (m, format!("the rigid-body {} ({} s)", to.robot, a.duration))
+    } else {
+        let mut check = wheelid::migrate::CheckSettings {
+            duration_s: a.duration,
+            ..Default::default()
+        };
+        check.simulation.seed = a.seed;
+        let m = migrate_on_simulator(&ctrl, &from, &to, &to_p, &check)?;
+        let plant = format!(
+            "{} (eq.-2.19 simulation with the target model's θ, {} s)",
+            to.robot, a.duration
+        );
+        (m, plant)
     };
-    let m = migrate_on_simulator(&ctrl, &from, &to, &to_p, &check)?;
     if let Some(out) = &a.out {
         wheelid::migrate::write_controller(out, &m.migrated.controller)?;
     }
     if a.json {
         println!("{}", serde_json::to_string_pretty(&m)?);
     } else {
-        let plant = format!(
-            "{} (eq.-2.19 simulation with the target model's θ, {} s)",
-            to.robot, a.duration
-        );
         print!("{}", migration_text(&m, &from.robot, &to.robot, &plant));
         if let Some(out) = &a.out {
             println!("migrated controller written to {}", out.display());
         }
+    }
+    Ok(())
+}
+
+fn run_export(a: ExportArgs) -> Result<()> {
+    let model = ModelFile::read(&a.model)?;
+    let name = a.robot.as_deref().or(model.robot.as_deref());
+    let profile = match name {
+        Some(n) => Some(RobotProfile::by_name(n).with_context(|| {
+            format!(
+                "robot `{n}` has no built-in profile (known: {}); give --robot or leave the geometry out by removing `robot` from {}",
+                RobotProfile::NAMES.join(", "),
+                a.model.display()
+            )
+        })?),
+        None => None,
+    };
+    let text = wheelid::export::ros2_yaml(&model, profile.as_ref(), &a.model.display().to_string());
+    match &a.out {
+        Some(p) => wheelid::core::recording::write_atomic(p, text.as_bytes())
+            .with_context(|| p.display().to_string())?,
+        None => print!("{text}"),
     }
     Ok(())
 }
@@ -821,5 +896,6 @@ fn main() -> Result<()> {
         Command::Simulate(a) => run_simulate(a),
         Command::Track(a) => run_track(a),
         Command::Migrate(a) => run_migrate(a),
+        Command::Export(a) => run_export(a),
     }
 }

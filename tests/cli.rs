@@ -617,3 +617,59 @@ fn migrate_writes_a_controller_that_track_runs_again() {
     assert!(!o.status.success());
     assert!(stderr(&o).contains("--from-robot"), "{}", stderr(&o));
 }
+
+/// `export --format ros2` (issue 16): the YAML parses, and its names are the upstream ones
+/// (ros2_controllers `diff_drive_controller_parameter.yaml`; docs.nav2.org
+/// `configuring-mppic.rst`), with the diagnosed yaw-rate limit and dead time and the built-in
+/// Pioneer's geometry.
+#[test]
+fn export_ros2_writes_the_upstream_parameter_names() {
+    use yaml_rust2::YamlLoader;
+    let dir = tempfile::tempdir().expect("tmp");
+    let model = dir.path().join("d.toml");
+    let yaml = dir.path().join("ros2.yaml");
+    let o = wheelid(&["diagnose", "--out", model.to_str().expect("utf-8")]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = std::fs::read_to_string(&model).expect("model");
+    let file: toml::Value = toml::from_str(&text).expect("toml");
+    let w_max = file["effects"]["velocity_saturation"]["w_max"]
+        .as_float()
+        .expect("w_max");
+    let delay = file["effects"]["input_delay"]["delay_s"]
+        .as_float()
+        .expect("delay");
+    let o = wheelid(&[
+        "export",
+        "--format",
+        "ros2",
+        model.to_str().expect("utf-8"),
+        "-o",
+        yaml.to_str().expect("utf-8"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let docs =
+        YamlLoader::load_from_str(&std::fs::read_to_string(&yaml).expect("yaml")).expect("parses");
+    let d = &docs[0];
+    let ddc = &d["diff_drive_controller"]["ros__parameters"];
+    assert_eq!(ddc["wheel_separation"].as_f64(), Some(0.34));
+    assert_eq!(ddc["wheel_radius"].as_f64(), Some(0.0975));
+    assert_eq!(
+        ddc["angular"]["z"]["has_velocity_limits"].as_bool(),
+        Some(true)
+    );
+    assert_eq!(ddc["angular"]["z"]["max_velocity"].as_f64(), Some(w_max));
+    assert_eq!(ddc["angular"]["z"]["min_velocity"].as_f64(), Some(-w_max));
+    assert_eq!(ddc["linear"]["x"]["max_velocity"].as_f64(), Some(1.4));
+    assert_eq!(
+        ddc["linear"]["x"]["has_acceleration_limits"].as_bool(),
+        Some(false)
+    );
+    let mppi = &d["controller_server"]["ros__parameters"]["FollowPath"];
+    assert_eq!(mppi["vx_max"].as_f64(), Some(1.4));
+    assert_eq!(mppi["wz_max"].as_f64(), Some(w_max));
+    assert!(
+        mppi["ax_max"].is_badvalue(),
+        "no acceleration limit was found"
+    );
+    assert_eq!(d["wheelid_response"]["delay_s"].as_f64(), Some(delay));
+}
