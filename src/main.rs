@@ -109,6 +109,11 @@ struct MigrateArgs {
     /// Seed of the target robot's noise.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Run the check on the robot of this config file's `[robot]` table (as `wheelid run`:
+    /// simulator, physics, replay, pioneer or khepera — `port = "loopback"` starts the
+    /// protocol server — or a plugin's); overrides --backend.
+    #[arg(long)]
+    robot: Option<PathBuf>,
     /// Print the report as JSON.
     #[arg(long)]
     json: bool,
@@ -818,7 +823,18 @@ fn run_migrate(a: MigrateArgs) -> Result<()> {
     if let Some(th) = to.theta {
         to_p.theta = th;
     }
-    let (m, plant) = if a.backend == "physics" {
+    let (m, plant) = if let Some(cfg) = &a.robot {
+        let duration = a.duration + 5.0;
+        let mut make = || -> wheelid::core::Result<Box<dyn wheelid::core::Robot>> {
+            wheelid::run::connect_robot(cfg, duration)
+                .map_err(|e| wheelid::core::Error::InvalidSetting(format!("{e:#}")))
+        };
+        let m = wheelid::migrate::migrate_on_robot(&ctrl, &from, &to, &mut make, None, a.duration)?;
+        (
+            m,
+            format!("the robot of {} ({} s)", cfg.display(), a.duration),
+        )
+    } else if a.backend == "physics" {
         let pp = physical_profile(Some(&to.robot))?;
         let ps = wheelid::robots::physics::PhysicsSettings {
             duration_s: a.duration + 5.0,

@@ -551,17 +551,7 @@ pub fn run(path: &Path, progress: bool) -> Result<RunOutput> {
     }
     let robot_t = table("robot", &file.robot);
     let kind = robot_t.kind()?;
-    let mut robot: Box<dyn Robot> = if ROBOT_TYPES.contains(&kind.as_str()) {
-        robot_t
-            .built_in::<dyn RobotSpec>()?
-            .connect(&cx)
-            .map_err(|e| robot_t.error(&format!("{e:#}")))?
-    } else if let Some(e) = plugins.robot(&kind) {
-        e.make(&robot_t.toml_text())
-            .map_err(|m| robot_t.error(&m))?
-    } else {
-        return Err(robot_t.unknown(&kind, &ROBOT_TYPES, &plugin_robots));
-    };
+    let mut robot = connect_table(&robot_t, &plugins, &plugin_robots, &cx)?;
     let excitation = match &file.excitation {
         Some(e) => e.build()?,
         None => ExcitationConfig::ThesisPioneer.build()?,
@@ -624,6 +614,68 @@ pub fn run(path: &Path, progress: bool) -> Result<RunOutput> {
         identification,
         files,
     })
+}
+
+/// The robot of a `[robot]` table: a built-in backend or a plugin's.
+fn connect_table(
+    robot_t: &Table<'_>,
+    plugins: &Plugins,
+    plugin_robots: &[String],
+    cx: &RunContext<'_>,
+) -> Result<Box<dyn Robot>> {
+    let kind = robot_t.kind()?;
+    if ROBOT_TYPES.contains(&kind.as_str()) {
+        robot_t
+            .built_in::<dyn RobotSpec>()?
+            .connect(cx)
+            .map_err(|e| robot_t.error(&format!("{e:#}")))
+    } else if let Some(e) = plugins.robot(&kind) {
+        e.make(&robot_t.toml_text()).map_err(|m| robot_t.error(&m))
+    } else {
+        Err(robot_t.unknown(&kind, &ROBOT_TYPES, plugin_robots))
+    }
+}
+
+/// A config file's `[robot]` table and its `plugins`; other sections are ignored (a `wheelid
+/// run` config serves).
+#[derive(Deserialize)]
+struct RobotOnly {
+    #[serde(default)]
+    plugins: Vec<PathBuf>,
+    robot: toml::Spanned<toml::Table>,
+}
+
+/// Connects (or starts) the robot of the config file at `path` — its `[robot]` table, a
+/// built-in backend (`simulator`, `physics`, `replay`, `pioneer`, `khepera`, with
+/// `port = "loopback"` for the protocol servers) or a plugin's — as `wheelid run` does, for a
+/// run of `duration_s` seconds. Used by `wheelid migrate --robot`.
+///
+/// # Errors
+/// The file's TOML errors (file, line, column), unknown types, plugin and backend errors.
+pub fn connect_robot(path: &Path, duration_s: f64) -> Result<Box<dyn Robot>> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let file: RobotOnly = toml::from_str(&text)
+        .map_err(|e| anyhow!("{}: {}", path.display(), toml_msg(&text, &e)))?;
+    let base = path.parent().unwrap_or(Path::new(""));
+    let cx = RunContext { base, duration_s };
+    let mut plugins = Plugins::default();
+    let builtin = BuiltIn {
+        robots: &ROBOT_TYPES,
+        models: &MODEL_TYPES,
+        solvers: &SOLVER_TYPES,
+    };
+    for p in &file.plugins {
+        plugins.load(&base.join(p), &builtin)?;
+    }
+    let [plugin_robots, _, _] = plugins.names();
+    let robot_t = Table {
+        section: "robot",
+        table: &file.robot,
+        file: path,
+        text: &text,
+    };
+    connect_table(&robot_t, &plugins, &plugin_robots, &cx)
 }
 
 /// Drives `robot` with `excitation` for `duration` seconds (`None`: until it has no more

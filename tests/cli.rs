@@ -609,6 +609,40 @@ fn migrate_writes_a_controller_that_track_runs_again() {
     // migrate's plant is the target model's (identified) θ, track's the built-in robot's
     // true θ: the identified model predicts the real tracking error within 2 %.
     assert!((again / rms(1) - 1.0).abs() < 0.02, "{again} vs {}", rms(1));
+    // Through the protocol stacks (ARCOS and the Khepera's serial protocol, loopback servers
+    // on the simulator): the same check on a robot backend.
+    let configs = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/configs");
+    for (from, to, cfg, gain) in [
+        ("k.toml", "p.toml", "run_pioneer_loopback.toml", 5.0),
+        ("p.toml", "k.toml", "run_khepera_loopback.toml", 1.5),
+    ] {
+        let cfg = configs.join(cfg);
+        let o = wheelid(&[
+            "migrate",
+            "--from",
+            &p(from),
+            "--to",
+            &p(to),
+            "--robot",
+            cfg.to_str().expect("utf-8"),
+            "--json",
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON");
+        let rms = |i: usize| v["runs"][i]["error"]["rms"].as_f64().expect("rms");
+        println!(
+            "{from} → {to} on {}: as it was {:.4} m, migrated {:.4} m",
+            cfg.display(),
+            rms(0),
+            rms(1)
+        );
+        assert!(
+            rms(0) >= gain * rms(1),
+            "{from} → {to}: {} vs {}",
+            rms(0),
+            rms(1)
+        );
+    }
     // The same robot on both sides is said; a robot without a profile is a clear error.
     let o = wheelid(&["migrate", "--from", &p("p.toml"), "--to", &p("p.toml")]);
     assert!(String::from_utf8_lossy(&o.stdout).contains("warning: source and target"));
