@@ -117,6 +117,9 @@ struct MigrateArgs {
     /// Print the report as JSON.
     #[arg(long)]
     json: bool,
+    /// Write PNG plots (the paths and the errors of the runs) into this directory.
+    #[arg(long)]
+    plot: Option<PathBuf>,
 }
 
 #[derive(clap::Args)]
@@ -787,8 +790,65 @@ fn profile_of(flag: Option<&str>, file: &ModelFile, which: &str) -> Result<Robot
     })
 }
 
+/// The check of a migration on the target chosen by the flags: a config's robot, the physics
+/// robot, or the simulation of the target model; with the plant's description.
+fn migrate_check(
+    a: &MigrateArgs,
+    ctrl: &wheelid::robots::migrate::ControllerSpec,
+    from: &wheelid::robots::migrate::RobotModel,
+    to: &wheelid::robots::migrate::RobotModel,
+    to_p: &RobotProfile,
+) -> Result<(wheelid::migrate::Migration, String)> {
+    use wheelid::migrate::migrate_on_simulator;
+    if let Some(cfg) = &a.robot {
+        let duration = a.duration + 5.0;
+        let mut make = || -> wheelid::core::Result<Box<dyn wheelid::core::Robot>> {
+            wheelid::run::connect_robot(cfg, duration)
+                .map_err(|e| wheelid::core::Error::InvalidSetting(format!("{e:#}")))
+        };
+        let m = wheelid::migrate::migrate_on_robot(ctrl, from, to, &mut make, None, a.duration)?;
+        Ok((
+            m,
+            format!("the robot of {} ({} s)", cfg.display(), a.duration),
+        ))
+    } else if a.backend == "physics" {
+        let pp = physical_profile(Some(&to.robot))?;
+        let ps = wheelid::robots::physics::PhysicsSettings {
+            duration_s: a.duration + 5.0,
+            seed: a.seed,
+            ..Default::default()
+        };
+        let mut make = || -> wheelid::core::Result<Box<dyn wheelid::core::Robot>> {
+            Ok(Box::new(wheelid::robots::physics::PhysicsRobot::new(
+                &pp, &ps,
+            )?))
+        };
+        let m = wheelid::migrate::migrate_on_robot(
+            ctrl,
+            from,
+            to,
+            &mut make,
+            Some(pp.theta()),
+            a.duration,
+        )?;
+        Ok((m, format!("the rigid-body {} ({} s)", to.robot, a.duration)))
+    } else {
+        let mut check = wheelid::migrate::CheckSettings {
+            duration_s: a.duration,
+            ..Default::default()
+        };
+        check.simulation.seed = a.seed;
+        let m = migrate_on_simulator(ctrl, from, to, to_p, &check)?;
+        let plant = format!(
+            "{} (eq.-2.19 simulation with the target model's θ, {} s)",
+            to.robot, a.duration
+        );
+        Ok((m, plant))
+    }
+}
+
 fn run_migrate(a: MigrateArgs) -> Result<()> {
-    use wheelid::migrate::{migrate_on_simulator, migration_text, robot_model};
+    use wheelid::migrate::{migration_text, robot_model};
     use wheelid::robots::migrate::{ControllerSpec, RobotModel};
     let (from, to, from_p, mut to_p) = match (&a.from, &a.to) {
         (Some(f), Some(t)) => {
@@ -823,51 +883,7 @@ fn run_migrate(a: MigrateArgs) -> Result<()> {
     if let Some(th) = to.theta {
         to_p.theta = th;
     }
-    let (m, plant) = if let Some(cfg) = &a.robot {
-        let duration = a.duration + 5.0;
-        let mut make = || -> wheelid::core::Result<Box<dyn wheelid::core::Robot>> {
-            wheelid::run::connect_robot(cfg, duration)
-                .map_err(|e| wheelid::core::Error::InvalidSetting(format!("{e:#}")))
-        };
-        let m = wheelid::migrate::migrate_on_robot(&ctrl, &from, &to, &mut make, None, a.duration)?;
-        (
-            m,
-            format!("the robot of {} ({} s)", cfg.display(), a.duration),
-        )
-    } else if a.backend == "physics" {
-        let pp = physical_profile(Some(&to.robot))?;
-        let ps = wheelid::robots::physics::PhysicsSettings {
-            duration_s: a.duration + 5.0,
-            seed: a.seed,
-            ..Default::default()
-        };
-        let mut make = || -> wheelid::core::Result<Box<dyn wheelid::core::Robot>> {
-            Ok(Box::new(wheelid::robots::physics::PhysicsRobot::new(
-                &pp, &ps,
-            )?))
-        };
-        let m = wheelid::migrate::migrate_on_robot(
-            &ctrl,
-            &from,
-            &to,
-            &mut make,
-            Some(pp.theta()),
-            a.duration,
-        )?;
-        (m, format!("the rigid-body {} ({} s)", to.robot, a.duration))
-    } else {
-        let mut check = wheelid::migrate::CheckSettings {
-            duration_s: a.duration,
-            ..Default::default()
-        };
-        check.simulation.seed = a.seed;
-        let m = migrate_on_simulator(&ctrl, &from, &to, &to_p, &check)?;
-        let plant = format!(
-            "{} (eq.-2.19 simulation with the target model's θ, {} s)",
-            to.robot, a.duration
-        );
-        (m, plant)
-    };
+    let (m, plant) = migrate_check(&a, &ctrl, &from, &to, &to_p)?;
     if let Some(out) = &a.out {
         wheelid::migrate::write_controller(out, &m.migrated.controller)?;
     }
@@ -878,6 +894,14 @@ fn run_migrate(a: MigrateArgs) -> Result<()> {
         if let Some(out) = &a.out {
             println!("migrated controller written to {}", out.display());
         }
+    }
+    if let Some(dir) = &a.plot {
+        let runs: Vec<(&str, &wheelid::robots::TrackResult)> = m
+            .runs
+            .iter()
+            .map(|r| (r.label.as_str(), &r.result))
+            .collect();
+        list_plots(&wheelid::plot::write_migration_plots(&runs, dir)?, a.json);
     }
     Ok(())
 }

@@ -57,6 +57,9 @@ pub struct Run {
     pub error: ErrorSummary,
     /// θ̂ at the end.
     pub theta_hat_end: [f64; 6],
+    /// The run's time series (for plots; not in the JSON).
+    #[serde(skip)]
+    pub result: TrackResult,
 }
 
 impl Run {
@@ -65,6 +68,7 @@ impl Run {
             label: label.into(),
             error: r.summary,
             theta_hat_end: r.final_theta_hat(),
+            result: r.clone(),
         }
     }
 }

@@ -510,3 +510,111 @@ pub fn write_diagnosis_plots(d: &Diagnosis, dir: &Path) -> Result<Vec<PathBuf>> 
     out.push(path);
     Ok(out)
 }
+
+/// The runs of a migration check side by side (`wheelid migrate --plot DIR`):
+/// * `migrate_paths.png`: the desired figure eight and each run's path (x, y) [m];
+/// * `migrate_error.png`: each run's distance error [m] against time [s].
+///
+/// `runs`: (label, result) in the order of [`crate::migrate::Migration::runs`].
+///
+/// # Errors
+/// If the directory cannot be created or a PNG cannot be written.
+pub fn write_migration_plots(runs: &[(&str, &TrackResult)], dir: &Path) -> Result<Vec<PathBuf>> {
+    register_font();
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let Some((_, first)) = runs.first() else {
+        return Ok(Vec::new());
+    };
+    let colors = [RED, GREEN, MAGENTA, CYAN];
+    let path = dir.join("migrate_paths.png");
+    {
+        let root = BitMapBackend::new(&path, (900, 900)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let all = || {
+            runs.iter()
+                .flat_map(|(_, r)| r.desired.iter().chain(&r.actual))
+        };
+        let ((x0, x1), (y0, y1)) = (range(all().map(|p| p[0])), range(all().map(|p| p[1])));
+        let mut chart = ChartBuilder::on(&root)
+            .caption(
+                format!("{}: the migrated figure eight", first.robot),
+                ("sans-serif", 20),
+            )
+            .margin(10)
+            .x_label_area_size(35)
+            .y_label_area_size(60)
+            .build_cartesian_2d(x0..x1, y0..y1)?;
+        chart
+            .configure_mesh()
+            .x_desc("x [m]")
+            .y_desc("y [m]")
+            .draw()?;
+        let step = (first.t.len() / MAX_POINTS).max(1);
+        chart
+            .draw_series(LineSeries::new(
+                first.desired.iter().step_by(step).map(|p| (p[0], p[1])),
+                BLUE.stroke_width(3),
+            ))?
+            .label("desired")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE));
+        for ((label, r), color) in runs.iter().zip(colors) {
+            let step = (r.t.len() / MAX_POINTS).max(1);
+            chart
+                .draw_series(LineSeries::new(
+                    r.actual.iter().step_by(step).map(|p| (p[0], p[1])),
+                    color.stroke_width(1),
+                ))?
+                .label(format!("{label} (RMS {:.4} m)", r.summary.rms))
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color));
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()?;
+        root.present()?;
+    }
+    let mut out = vec![path];
+    let path = dir.join("migrate_error.png");
+    {
+        let root = BitMapBackend::new(&path, (1200, 500)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let (t0, t1) = range(runs.iter().flat_map(|(_, r)| r.t.iter().copied()));
+        let (_, e1) = range(runs.iter().flat_map(|(_, r)| r.error.iter().copied()));
+        let mut chart = ChartBuilder::on(&root)
+            .caption(
+                format!("{}: distance error", first.robot),
+                ("sans-serif", 18),
+            )
+            .margin(10)
+            .x_label_area_size(35)
+            .y_label_area_size(60)
+            .build_cartesian_2d(t0..t1, (1e-4f64..e1.max(1e-3)).log_scale())?;
+        chart
+            .configure_mesh()
+            .x_desc("t [s]")
+            .y_desc("error [m]")
+            .draw()?;
+        for ((label, r), color) in runs.iter().zip(colors) {
+            let step = (r.t.len() / MAX_POINTS).max(1);
+            chart
+                .draw_series(LineSeries::new(
+                    r.t.iter()
+                        .zip(&r.error)
+                        .step_by(step)
+                        .map(|(a, b)| (*a, b.max(1e-4))),
+                    color.stroke_width(1),
+                ))?
+                .label(*label)
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color));
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()?;
+        root.present()?;
+    }
+    out.push(path);
+    Ok(out)
+}

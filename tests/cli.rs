@@ -643,6 +643,15 @@ fn migrate_writes_a_controller_that_track_runs_again() {
             rms(1)
         );
     }
+    // --plot draws both runs.
+    let o = wheelid(&["migrate", "--plot", &p("plots")]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for f in ["migrate_paths.png", "migrate_error.png"] {
+        let len = std::fs::metadata(dir.path().join("plots").join(f))
+            .expect(f)
+            .len();
+        assert!(len > 10_000, "{f}: {len} bytes");
+    }
     // The same robot on both sides is said; a robot without a profile is a clear error.
     let o = wheelid(&["migrate", "--from", &p("p.toml"), "--to", &p("p.toml")]);
     assert!(String::from_utf8_lossy(&o.stdout).contains("warning: source and target"));
