@@ -148,42 +148,62 @@ fn the_migrated_adaptation_recovers_from_a_payload() {
     );
 }
 
-/// On the rigid-body backend (physics the model did not write): both robots identified from
-/// 120 s physics recordings, the Khepera-like robot's controller migrated to the Pioneer-like
-/// robot and run on it through the `Robot` trait: within 20 % of the controller set up with
-/// the θ the Pioneer's constants map to, and ≥ 5× better than moved unchanged.
-#[test]
-fn khepera_controller_migrates_to_the_physics_pioneer() {
-    use wheelid::robots::physics::{
-        PhysicalProfile, PhysicsRobot, PhysicsSettings, simulate_physics_recording,
+/// A physics robot's model as `wheelid identify` writes it: 120 s of a random multisine
+/// (seed 5) on the rigid-body robot, encoders on.
+fn physics_model(pp: &wheelid::robots::physics::PhysicalProfile) -> RobotModel {
+    use wheelid::robots::physics::{PhysicsSettings, simulate_physics_recording};
+    let s = PhysicsSettings {
+        duration_s: 120.0,
+        seed: 5,
+        ..PhysicsSettings::default()
     };
-    let model_of = |pp: &PhysicalProfile| {
-        let s = PhysicsSettings {
-            duration_s: 120.0,
-            seed: 5,
-            ..PhysicsSettings::default()
-        };
-        let exc = pp.random_multisine(5).expect("excitation");
-        let rec = simulate_physics_recording(pp, &exc, &s).expect("simulates");
-        let id = identify(&[rec], &VwPd, &Ols::default(), &IdentifySettings::default())
-            .expect("identifies");
-        let mut file = ModelFile::from_identification(&id);
-        file.robot = Some(pp.name.clone());
-        robot_model(&file, &pp.model_profile()).expect("six θ")
-    };
-    let (pk, pp) = (PhysicalProfile::khepera3(), PhysicalProfile::pioneer3dx());
-    let (from, to) = (model_of(&pk), model_of(&pp));
-    let ctrl = ControllerSpec::tuned_on(&from, &pk.model_profile()).expect("controller");
+    let exc = pp.random_multisine(5).expect("excitation");
+    let rec = simulate_physics_recording(pp, &exc, &s).expect("simulates");
+    let id =
+        identify(&[rec], &VwPd, &Ols::default(), &IdentifySettings::default()).expect("identifies");
+    let mut file = ModelFile::from_identification(&id);
+    file.robot = Some(pp.name.clone());
+    robot_model(&file, &pp.model_profile()).expect("six θ")
+}
+
+/// The controller tuned on `src` migrated to `dst`, both identified on the rigid-body backend,
+/// checked on the rigid-body `dst` through the `Robot` trait (the θ its constants map to for
+/// the third run).
+fn physics_migration(
+    src: &wheelid::robots::physics::PhysicalProfile,
+    dst: &wheelid::robots::physics::PhysicalProfile,
+) -> Migration {
+    use wheelid::robots::physics::{PhysicsRobot, PhysicsSettings};
+    let (from, to) = (physics_model(src), physics_model(dst));
+    let ctrl = ControllerSpec::tuned_on(&from, &src.model_profile()).expect("controller");
     let mut make = || -> wheelid::core::Result<Box<dyn wheelid::core::Robot>> {
         let s = PhysicsSettings {
             duration_s: 95.0,
             seed: 6,
             ..PhysicsSettings::default()
         };
-        Ok(Box::new(PhysicsRobot::new(&pp, &s)?))
+        Ok(Box::new(PhysicsRobot::new(dst, &s)?))
     };
-    let m =
-        wheelid::migrate::migrate_on_robot(&ctrl, &from, &to, &mut make, Some(pp.theta()), 90.0)
-            .expect("runs");
+    wheelid::migrate::migrate_on_robot(&ctrl, &from, &to, &mut make, Some(dst.theta()), 90.0)
+        .expect("runs")
+}
+
+/// On the rigid-body backend (physics the model did not write): the Khepera-like robot's
+/// controller on the Pioneer-like robot, within 20 % of the controller set up with the mapped
+/// θ and ≥ 5× better than moved unchanged.
+#[test]
+fn khepera_controller_migrates_to_the_physics_pioneer() {
+    use wheelid::robots::physics::PhysicalProfile;
+    let m = physics_migration(&PhysicalProfile::khepera3(), &PhysicalProfile::pioneer3dx());
     check(&m, "Khepera → physics Pioneer", 5.0);
+}
+
+/// The other way on the rigid-body backend: within 20 % of the mapped-θ controller; better
+/// than unchanged only by 1.47× (measured: 0.0056 → 0.0038 m; asserted ≥ 1.3×) — the 5× goal
+/// is not met this way, as on the eq.-2.19 simulator.
+#[test]
+fn pioneer_controller_migrates_to_the_physics_khepera() {
+    use wheelid::robots::physics::PhysicalProfile;
+    let m = physics_migration(&PhysicalProfile::pioneer3dx(), &PhysicalProfile::khepera3());
+    check(&m, "Pioneer → physics Khepera", 1.3);
 }
