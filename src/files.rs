@@ -40,6 +40,34 @@ use wheelid_core::Recording;
 
 use crate::identify::Identification;
 
+/// Why a recording could not be read ([`read_recording`]); every case names the file.
+#[derive(Debug, thiserror::Error)]
+pub enum ReadError {
+    /// A CSV recording: unreadable, or bad content (with line and column).
+    #[error(transparent)]
+    Csv(#[from] wheelid_core::Error),
+    /// A bag: unreadable, not MCAP, a missing topic, a message that does not decode; or a file
+    /// that is neither format.
+    #[error(transparent)]
+    Bag(#[from] wheelid_core::RobotError),
+}
+
+/// Reads one recording for `identify` and `diagnose`: a CSV (RECORDING_FORMAT.md) or a ROS 2
+/// bag (`.mcap`, or a rosbag2 folder: `/cmd_vel` and `/odom`, timed by log time, as
+/// `wheelid simulate --out x.mcap` writes and [`wheelid_robots::replay::read_mcap`] reads);
+/// the format from the extension, else from the content (MCAP magic bytes, else text).
+///
+/// # Errors
+/// [`ReadError`], naming the file.
+pub fn read_recording(path: &Path) -> Result<Recording, ReadError> {
+    use wheelid_robots::replay::{ReplayFormat, ReplaySettings};
+    let settings = ReplaySettings::new(path);
+    match settings.resolved_format()? {
+        ReplayFormat::Csv => Ok(Recording::read_csv(path)?),
+        ReplayFormat::Mcap => Ok(settings.load()?),
+    }
+}
+
 /// Per-channel quality in the model file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

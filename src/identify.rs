@@ -30,6 +30,9 @@ use wheelid_solvers::{InstrumentalVariables, OutputError};
 
 use crate::timing::{TimingReport, fit_with_timing};
 
+mod checks;
+pub use checks::POOR_FIT_PERCENT;
+
 /// Errors of an identification run.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
@@ -46,9 +49,13 @@ pub enum IdentifyError {
         #[source]
         source: SolveError,
     },
-    /// Unknown model or solver name, or bad bounds.
+    /// Unknown model or solver name, bad bounds, or commands that excite nothing.
     #[error("{0}")]
     Setting(String),
+    /// No estimator gave a model (each estimate unstable, non-finite or with a singular
+    /// covariance); the message says why for each.
+    #[error("{0}")]
+    NoModel(String),
 }
 
 /// Settings of an identification run (separate from its result, [`Identification`]).
@@ -63,6 +70,10 @@ pub struct IdentifySettings {
     pub estimator: Estimator,
     /// Also run the other estimators and report every θ side by side.
     pub compare: bool,
+    /// Return the estimate asked for even when no estimate is a model (flagged in
+    /// `warnings` and `estimates[..].invalid`) instead of [`IdentifyError::NoModel`]: for a
+    /// caller that only starts from it (the diagnosis starts its own fit from least squares).
+    pub allow_invalid: bool,
 }
 
 /// How θ is estimated from the recordings.
@@ -107,6 +118,11 @@ pub struct EstimateReport {
     pub std_err: Vec<f64>,
     /// How it ended.
     pub status: SolveStatus,
+    /// Per-parameter bound state.
+    pub bound_state: Vec<BoundState>,
+    /// Why this estimate is no model (unstable, non-finite, singular covariance), if it is
+    /// not one; such an estimate is never the answer.
+    pub invalid: Option<String>,
     /// Iterations (IV) or residual evaluations (OE); 1 for least squares.
     pub iterations: usize,
     /// Wall time [s].
@@ -181,8 +197,12 @@ pub struct Identification {
     pub param_names: Vec<String>,
     /// Parameter units.
     pub param_units: Vec<String>,
-    /// The estimator whose answer `theta` is.
+    /// The estimator whose answer `theta` is: the one asked for, or the best valid one when
+    /// it gave no model (`warnings` says why).
     pub estimator: Estimator,
+    /// What the answer cannot say, in words: a fallback from the estimator asked for, a lag
+    /// shorter than a sample, a poor free-run fit (pointing at `wheelid diagnose`).
+    pub warnings: Vec<String>,
     /// θ̂.
     pub theta: Vec<f64>,
     /// Standard errors of θ̂ (least squares and IV: Newey–West over the filter's correlation
@@ -316,11 +336,16 @@ pub fn identify(
             reg.y.len(),
         ));
     }
+    // A constant command whose channel least squares still solved (noise makes the
+    // regressors full rank) is no information either.
+    checks::check_excitation(recordings)?;
     let ls = EstimateReport {
         estimator: Estimator::Ls,
         theta: theta.clone(),
         std_err: std_err.clone(),
         status: SolveStatus::Solved,
+        bound_state: bound_state.clone(),
+        invalid: None,
         iterations: 1,
         seconds: clock.elapsed().as_secs_f64(),
     };
@@ -364,13 +389,15 @@ pub fn identify(
         if settings.estimator == Estimator::Iv {
             theta.clone_from(&th);
             std_err.clone_from(&fit.std_err);
-            bound_state = bs;
+            bound_state.clone_from(&bs);
         }
         estimates.push(EstimateReport {
             estimator: Estimator::Iv,
             theta: th,
             std_err: fit.std_err,
             status: fit.status,
+            bound_state: bs,
+            invalid: None,
             iterations: fit.iterations,
             seconds: clock.elapsed().as_secs_f64(),
         });
@@ -402,9 +429,32 @@ pub fn identify(
             theta: fit.theta[..p].to_vec(),
             std_err: fit.std_err[..p].to_vec(),
             status: fit.status,
+            bound_state: fit.bound_state[..p].to_vec(),
+            invalid: None,
             iterations: fit.evaluations,
             seconds: fit.seconds,
         });
+    }
+    // Never a nonsense answer: the estimate asked for, or the best valid one.
+    let eq_2_19 = checks::is_eq_2_19(&names);
+    for e in &mut estimates {
+        e.invalid = checks::invalid(e, &e.bound_state, eq_2_19);
+    }
+    let (estimator, mut warnings) =
+        checks::choose(&estimates, settings.estimator, settings.allow_invalid)?;
+    if estimator != settings.estimator {
+        let e = estimates
+            .iter()
+            .find(|e| e.estimator == estimator)
+            .ok_or_else(|| IdentifyError::Setting("the fallback estimate is missing".into()))?;
+        theta.clone_from(&e.theta);
+        std_err.clone_from(&e.std_err);
+        bound_state.clone_from(&e.bound_state);
+        if estimator != Estimator::Oe {
+            initial = vec![None; conditioned.len()];
+            offset = None;
+            fitted_recordings = restamped.clone();
+        }
     }
     let ls_shift_percent = theta
         .iter()
@@ -421,6 +471,7 @@ pub fn identify(
     let with_offset = CommandOffset::new(model, &offset_params)?;
     for ((c, x0), rec) in conditioned.iter().zip(initial).zip(&fitted_recordings) {
         let measured = vec![rec.v.clone(), rec.w.clone()];
+        let x0_estimated = x0.is_some();
         let initial = match x0 {
             Some(x) => x,
             None => vec![c.smooth(&c.v)?[0], c.smooth(&c.w)?[0]],
@@ -433,12 +484,19 @@ pub fn identify(
             }
             None => model.simulate(&theta, rec, &initial)?,
         };
+        // A window-averaged recording's first sample averages over a window before it began,
+        // under commands it does not hold: out of output error's cost, so out of the fit too
+        // (its estimated initial state is free to miss it).
+        let skip = usize::from(
+            rec.velocity_sampling() == wheelid_core::VelocitySampling::WindowAverage
+                && x0_estimated,
+        );
         let fits: Vec<f64> = (0..nch)
-            .map(|ch| metrics::fit_percent(&measured[ch], &simulated[ch]))
+            .map(|ch| metrics::fit_percent(&measured[ch][skip..], &simulated[ch][skip..]))
             .collect();
         for ch in 0..nch {
-            all_meas[ch].extend_from_slice(&measured[ch]);
-            all_sim[ch].extend_from_slice(&simulated[ch]);
+            all_meas[ch].extend_from_slice(&measured[ch][skip..]);
+            all_sim[ch].extend_from_slice(&simulated[ch][skip..]);
         }
         files.push(FileReport {
             source: c.source.clone(),
@@ -455,7 +513,7 @@ pub fn identify(
             simulated,
         });
     }
-    let channels = model
+    let channels: Vec<ChannelReport> = model
         .channels()
         .iter()
         .zip(&channel_quality)
@@ -469,10 +527,16 @@ pub fn identify(
         })
         .collect();
     let (steady_theta4, steady_theta6) = steady_state(&conditioned, &theta);
+    let dt = files.iter().map(|f| f.dt).fold(f64::INFINITY, f64::min);
+    if eq_2_19 {
+        warnings.extend(checks::lag_notices(&theta, dt));
+    }
+    warnings.extend(checks::poor_fit(&channels, recordings));
     Ok(Identification {
         model: model.name().into(),
         solver: solver.name().into(),
-        estimator: settings.estimator,
+        estimator,
+        warnings,
         estimates,
         ls_shift_percent,
         noise_std,

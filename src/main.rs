@@ -15,6 +15,43 @@ use wheelid::robots::{
 };
 use wheelid::{core::Recording, models, report, solvers};
 
+/// `println!` that survives a closed pipe (`wheelid identify | head`): once standard output is
+/// gone, further output is dropped and the command still finishes its work (the files it
+/// writes are written).
+macro_rules! out {
+    ($($t:tt)*) => {
+        emit(format_args!($($t)*), true)
+    };
+}
+
+/// As [`out!`], without the line end (`print!`).
+macro_rules! out_raw {
+    ($($t:tt)*) => {
+        emit(format_args!($($t)*), false)
+    };
+}
+
+/// Writes one line to standard output unless it was closed; any other write error is said
+/// once on standard error.
+fn emit(args: std::fmt::Arguments<'_>, line: bool) {
+    use std::io::Write;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    static CLOSED: AtomicBool = AtomicBool::new(false);
+    if CLOSED.load(Ordering::Relaxed) {
+        return;
+    }
+    let mut o = std::io::stdout().lock();
+    if let Err(e) = o
+        .write_fmt(args)
+        .and_then(|()| if line { o.write_all(b"\n") } else { Ok(()) })
+    {
+        CLOSED.store(true, Ordering::Relaxed);
+        if e.kind() != std::io::ErrorKind::BrokenPipe {
+            eprintln!("wheelid: standard output: {e}; the rest of the report is dropped");
+        }
+    }
+}
+
 #[derive(Parser)]
 #[command(
     name = "wheelid",
@@ -28,35 +65,48 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Identify θ1…θ6 from recordings (CSV, see RECORDING_FORMAT.md). With no file, identifies a
-    /// recording of the built-in simulated Pioneer 3-DX and prints the true values beside.
+    /// Identify θ1…θ6 of eq. 2.19 from recordings (CSV or ROS 2 bags).
+    ///
+    /// Least squares on the filtered regression (thesis eqs. 4.2–4.7), then the chosen
+    /// estimator (output error by default). With no file, identifies 150 s of the built-in
+    /// simulated Pioneer 3-DX and prints the true θ beside the estimates.
     Identify(IdentifyArgs),
-    /// Simulate a robot (eq. 2.19 with encoders and optional effects) under an excitation and
-    /// write the recording as CSV.
+    /// Simulate a robot under an excitation and write the recording (CSV or MCAP).
+    ///
+    /// The simulator integrates eq. 2.19 with encoders and optional effects; the physics
+    /// backend is an independent rigid-body robot.
     Simulate(SimulateArgs),
-    /// Diagnose the mismatch between the model and recordings: test the residuals, locate the
-    /// misfit, name the physics left out from a library of candidates, model it and show the
-    /// validation fit improve. With no file, diagnoses a built-in simulated Pioneer 3-DX with
-    /// a concealed dead time and yaw-rate limit.
+    /// Diagnose where a model and recordings disagree, and name the physics left out.
+    ///
+    /// Tests the residuals, locates the misfit, names the physics left out from a library of
+    /// candidates, models it and shows the validation fit improve. With no file, diagnoses a
+    /// built-in simulated Pioneer 3-DX with a concealed dead time and yaw-rate limit.
     Diagnose(DiagnoseArgs),
-    /// Run a whole job from a TOML file: drive a robot backend (simulator, replay of a CSV or
-    /// ROS 2 MCAP bag, Pioneer over ARCOS, Khepera III over serial/TCP, or a plugin's) with an
-    /// excitation, identify the chosen model with the chosen solver, and write the recording,
-    /// the model (TOML) and the report. See `examples/configs/run_*.toml`.
+    /// Run a whole identification job from a TOML file: drive a robot, identify, write.
+    ///
+    /// Drives a robot backend (simulator, physics, replay of a CSV or ROS 2 MCAP bag, Pioneer
+    /// over ARCOS, Khepera III over serial/TCP, or a plugin's) with an excitation, identifies
+    /// the chosen model with the chosen solver, and writes the recording, the model (TOML) and
+    /// the report. See `examples/configs/run_*.toml`.
     Run(RunArgs),
-    /// Figure-eight tracking with the inverse-dynamics controller and adaptive law (thesis
-    /// ch. 3–4) on a simulated robot (eq. 2.19, or the rigid-body robot with `--backend
-    /// physics`); reports the distance error.
+    /// Track a figure eight with the adaptive inverse-dynamics controller (thesis ch. 3–4).
+    ///
+    /// Runs on a simulated robot (eq. 2.19, or the rigid-body robot with `--backend physics`)
+    /// and reports the distance error.
     Track(TrackArgs),
-    /// Move a tracking controller from one robot to another (thesis ch. 3–4): θ̂ and the
-    /// projection bounds from the target's model, gains, γ and the figure eight scaled to the
-    /// target, every choice with its reason; then track the migrated figure eight on the
-    /// target's simulation with the controller as it was and as migrated. With no model
-    /// files: the built-in Khepera III's controller moved to the built-in Pioneer 3-DX.
+    /// Move a tracking controller from one robot to another and check it on the target.
+    ///
+    /// θ̂ and the projection bounds come from the target's model; gains, γ and the figure
+    /// eight are scaled to the target, every choice with its reason (thesis ch. 3–4). Then the
+    /// migrated figure eight is tracked on the target with the controller as it was and as
+    /// migrated. With no model files: the built-in Khepera III's controller moved to the
+    /// built-in Pioneer 3-DX.
     Migrate(MigrateArgs),
-    /// Export a model file for another stack: `--format ros2` writes the YAML parameters of
-    /// ROS 2's diff_drive_controller and Nav2's MPPI controller (limits found by diagnosis,
-    /// wheel geometry of the built-in profile) and the response lag.
+    /// Export a model file for another stack (ROS 2 controller and Nav2 parameters).
+    ///
+    /// `--format ros2` writes the YAML parameters of ROS 2's diff_drive_controller and Nav2's
+    /// MPPI controller (limits found by diagnosis, wheel geometry of the built-in profile) and
+    /// the response lag.
     Export(ExportArgs),
 }
 
@@ -233,14 +283,14 @@ fn run_run(a: RunArgs) -> Result<()> {
     use std::io::IsTerminal;
     let out = wheelid::run::run(&a.config, std::io::stderr().is_terminal())?;
     if a.json {
-        println!(
+        out!(
             "{}",
             serde_json::to_string_pretty(&report::to_json(&out.identification, None))?
         );
     } else {
-        print!("{}", report::to_text(&out.identification, None));
+        out_raw!("{}", report::to_text(&out.identification, None));
         for f in &out.files {
-            println!("written: {}", f.display());
+            out!("written: {}", f.display());
         }
     }
     Ok(())
@@ -273,7 +323,7 @@ fn run_simulate_physics(a: &SimulateArgs, cfg: &SimulateConfig) -> Result<()> {
     };
     let rec = simulate_physics_recording(&profile, &excitation, &s)?;
     write_recording(&rec, &a.out)?;
-    println!(
+    out!(
         "{} samples ({:.1} s of the physics {} at {} s, timing {}) written to {}",
         rec.len(),
         s.duration_s,
@@ -354,7 +404,7 @@ fn run_simulate(a: SimulateArgs) -> Result<()> {
     let rec = simulate_recording(&robot, &excitation.build()?, &sim)?;
     // CSV, or a ROS 2 bag: /cmd_vel (geometry_msgs/Twist) and /odom (nav_msgs/Odometry).
     write_recording(&rec, &a.out)?;
-    println!(
+    out!(
         "{} samples ({:.1} s of {} at {} s) written to {}",
         rec.len(),
         sim.duration_s,
@@ -364,7 +414,7 @@ fn run_simulate(a: SimulateArgs) -> Result<()> {
     );
     let effects = sim.effects.active();
     if !effects.is_empty() {
-        println!("effects: {}", effects.join(", "));
+        out!("effects: {}", effects.join(", "));
     }
     Ok(())
 }
@@ -416,9 +466,9 @@ fn run_track(a: TrackArgs) -> Result<()> {
     let backend = a.backend.as_str();
     if a.json {
         let j = report::track_json(&robot, backend, &effects, &s, &r);
-        println!("{}", serde_json::to_string_pretty(&j)?);
+        out!("{}", serde_json::to_string_pretty(&j)?);
     } else {
-        print!("{}", report::track_text(&robot, backend, &effects, &s, &r));
+        out_raw!("{}", report::track_text(&robot, backend, &effects, &s, &r));
     }
     if let Some(dir) = &a.plot {
         list_plots(&wheelid::plot::write_track_plots(&r, dir)?, a.json);
@@ -499,7 +549,8 @@ fn track_settings(
 
 #[derive(clap::Args)]
 struct IdentifyArgs {
-    /// Recording CSV files; several files are one multi-experiment identification.
+    /// Recordings: CSV (RECORDING_FORMAT.md) or ROS 2 bags (`.mcap`, a rosbag2 folder; by
+    /// extension, else by content); several files are one multi-experiment identification.
     files: Vec<PathBuf>,
     /// Model parameterization.
     #[arg(long, default_value = "vw-pd", value_parser = models::MODEL_NAMES)]
@@ -549,10 +600,11 @@ fn run_identify(a: IdentifyArgs) -> Result<()> {
         };
         let rec = simulate_recording(&robot, &Excitation::thesis_pioneer(), &settings)?;
         if !a.json {
-            println!(
+            out!(
                 "No recording given: identifying {:.0} s of the built-in simulated Pioneer 3-DX \
                  (10 Hz, thesis §4.4.2 excitation, encoder quantization and noise, seed {}).\n",
-                settings.duration_s, a.seed
+                settings.duration_s,
+                a.seed
             );
         }
         (vec![rec], Some(robot.theta.to_vec()))
@@ -560,7 +612,7 @@ fn run_identify(a: IdentifyArgs) -> Result<()> {
         let recs = a
             .files
             .iter()
-            .map(Recording::read_csv)
+            .map(|f| wheelid::files::read_recording(f))
             .collect::<Result<Vec<_>, _>>()?;
         (recs, None)
     };
@@ -579,12 +631,12 @@ fn run_identify(a: IdentifyArgs) -> Result<()> {
     }
     let id = identify(&recordings, model.as_ref(), solver.as_ref(), &settings)?;
     if a.json {
-        println!(
+        out!(
             "{}",
             serde_json::to_string_pretty(&report::to_json(&id, truth.as_deref()))?
         );
     } else {
-        print!("{}", report::to_text(&id, truth.as_deref()));
+        out_raw!("{}", report::to_text(&id, truth.as_deref()));
     }
     if let Some(out) = &a.out {
         let fallback = a.files.is_empty().then_some("pioneer3dx");
@@ -592,7 +644,7 @@ fn run_identify(a: IdentifyArgs) -> Result<()> {
             .on_robot_of(&recordings, fallback)
             .write(out)?;
         if !a.json {
-            println!("identified model written to {}", out.display());
+            out!("identified model written to {}", out.display());
         }
     }
     if let Some(dir) = &a.plot {
@@ -605,14 +657,15 @@ fn run_identify(a: IdentifyArgs) -> Result<()> {
 fn list_plots(files: &[PathBuf], json: bool) {
     if !json {
         for f in files {
-            println!("plot: {}", f.display());
+            out!("plot: {}", f.display());
         }
     }
 }
 
 #[derive(clap::Args)]
 struct DiagnoseArgs {
-    /// Recording CSV files (several: diagnosed together).
+    /// Recordings: CSV or ROS 2 bags (`.mcap`, a rosbag2 folder); several are diagnosed
+    /// together.
     files: Vec<PathBuf>,
     /// TOML configuration (files, model, candidates, blocks, alpha, …; see
     /// `wheelid::config::DiagnoseConfig`); the flags below override it.
@@ -675,22 +728,22 @@ fn run_diagnose(a: DiagnoseArgs) -> Result<()> {
     let recordings = if files.is_empty() {
         let (rec, what) = builtin_diagnosis_recording(a.seed)?;
         if !a.json {
-            println!("No recording given: diagnosing {what}.\n");
+            out!("No recording given: diagnosing {what}.\n");
         }
         vec![rec]
     } else {
         files
             .iter()
-            .map(Recording::read_csv)
+            .map(|f| wheelid::files::read_recording(f))
             .collect::<Result<Vec<_>, _>>()?
     };
     let bar = Bar::new(!a.json);
     let d = wheelid::diagnose::diagnose_observed(&recordings, model.as_ref(), &settings, &bar)?;
     bar.0.finish_and_clear();
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&d)?);
+        out!("{}", serde_json::to_string_pretty(&d)?);
     } else {
-        print!("{}", report::diagnosis_text(&d));
+        out_raw!("{}", report::diagnosis_text(&d));
     }
     let plot = a.plot.clone().or(cfg.plot.map(|p| base.join(p)));
     if let Some(dir) = &plot {
@@ -703,7 +756,7 @@ fn run_diagnose(a: DiagnoseArgs) -> Result<()> {
             .on_robot_of(&recordings, fallback)
             .write(out)?;
         if !a.json {
-            println!("written: {}", out.display());
+            out!("written: {}", out.display());
         }
     }
     Ok(())
@@ -862,7 +915,7 @@ fn run_migrate(a: MigrateArgs) -> Result<()> {
         _ => {
             let (fp, tp) = (RobotProfile::khepera3(), RobotProfile::pioneer3dx());
             if !a.json {
-                println!(
+                out!(
                     "No model files: the built-in Khepera III's controller moved to the built-in \
                      Pioneer 3-DX (their thesis θ taken as identified models).\n"
                 );
@@ -888,11 +941,11 @@ fn run_migrate(a: MigrateArgs) -> Result<()> {
         wheelid::migrate::write_controller(out, &m.migrated.controller)?;
     }
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&m)?);
+        out!("{}", serde_json::to_string_pretty(&m)?);
     } else {
-        print!("{}", migration_text(&m, &from.robot, &to.robot, &plant));
+        out_raw!("{}", migration_text(&m, &from.robot, &to.robot, &plant));
         if let Some(out) = &a.out {
-            println!("migrated controller written to {}", out.display());
+            out!("migrated controller written to {}", out.display());
         }
     }
     if let Some(dir) = &a.plot {
@@ -923,7 +976,7 @@ fn run_export(a: ExportArgs) -> Result<()> {
     match &a.out {
         Some(p) => wheelid::core::recording::write_atomic(p, text.as_bytes())
             .with_context(|| p.display().to_string())?,
-        None => print!("{text}"),
+        None => out_raw!("{text}"),
     }
     Ok(())
 }

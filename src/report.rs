@@ -40,6 +40,7 @@ pub fn to_json(id: &Identification, truth: Option<&[f64]>) -> Value {
         "files": id.files,
         "steady_state": {"theta4": id.steady_theta4, "theta6": id.steady_theta6},
         "timing": id.timing,
+        "warnings": id.warnings,
     });
     if let Some(t) = truth {
         v["theta_true"] = json!(t);
@@ -194,6 +195,9 @@ pub fn to_text(id: &Identification, truth: Option<&[f64]>) -> String {
         ss("θ4", id.steady_theta4),
         ss("θ6", id.steady_theta6)
     );
+    for w in &id.warnings {
+        let _ = writeln!(s, "\nwarning: {w}");
+    }
     s
 }
 

@@ -582,12 +582,8 @@ pub fn run(path: &Path, progress: bool) -> Result<RunOutput> {
             .unwrap_or(ConditionSettings::default().order),
         ..ConditionSettings::default()
     };
-    let identification = identify(
-        std::slice::from_ref(&recording),
-        model.as_ref(),
-        solver.as_ref(),
-        &settings,
-    )?;
+    // The drive is written before it is identified: a robot's run is never lost to an
+    // identification that fails.
     let dir = base.join(&file.output.dir);
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     let files = vec![
@@ -597,6 +593,13 @@ pub fn run(path: &Path, progress: bool) -> Result<RunOutput> {
         dir.join("report.json"),
     ];
     recording.write_csv(&files[0])?;
+    let identification = identify(
+        std::slice::from_ref(&recording),
+        model.as_ref(),
+        solver.as_ref(),
+        &settings,
+    )
+    .with_context(|| format!("identifying (the drive is kept in {})", files[0].display()))?;
     ModelFile::from_identification(&identification)
         .on_robot_of(std::slice::from_ref(&recording), None)
         .write(&files[1])?;

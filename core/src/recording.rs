@@ -419,7 +419,9 @@ impl Recording {
         Self::from_csv_str(&text, path)
     }
 
-    /// Parses recording CSV text; `source` names it in errors.
+    /// Parses recording CSV text; `source` names it in errors. A UTF-8 byte-order mark, CRLF
+    /// line ends, blank lines and `#` comment lines among the rows are accepted (spreadsheet
+    /// exports, hand-annotated logs); line numbers in errors count every line of the file.
     ///
     /// # Errors
     /// [`Error::MissingColumn`], [`Error::Malformed`] (ragged rows), [`Error::BadValue`]
@@ -427,6 +429,8 @@ impl Recording {
     /// column; [`Error::TooShort`] if there is no data row.
     pub fn from_csv_str(text: &str, source: impl Into<PathBuf>) -> Result<Self> {
         let source: PathBuf = source.into();
+        // A byte-order mark (spreadsheet exports) is not part of the first line.
+        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
         let mut meta = Vec::new();
         let mut offset = 0usize; // byte offset of the header line
         let mut meta_lines = 0u64;
@@ -447,6 +451,7 @@ impl Recording {
         let mut rdr = csv::ReaderBuilder::new()
             .has_headers(true)
             .trim(csv::Trim::All)
+            .comment(Some(b'#'))
             .from_reader(body.as_bytes());
         let header_line = meta_lines + 1;
         let headers = rdr
@@ -470,13 +475,27 @@ impl Recording {
             opt_idx.iter().map(|i| i.map(|_| Vec::new())).collect();
         let mut record = csv::StringRecord::new();
         let mut lines: Vec<u64> = Vec::new();
+        // (byte offset in `body`, newlines before it).
+        let mut counted = (0usize, 0u64);
         loop {
             match rdr.read_record(&mut record) {
                 Ok(false) => break,
                 Ok(true) => {}
                 Err(e) => return Err(csv_error(&source, meta_lines, &e)),
             }
-            let line = record.position().map_or(0, |p| p.line()) + meta_lines;
+            // The file's line: newlines counted up to the record's last byte (the reader's own
+            // count leaves out the comment and blank lines before a record).
+            let bytes = body.as_bytes();
+            let mut end = (rdr.position().byte() as usize).min(bytes.len());
+            while end > counted.0 && matches!(bytes[end - 1], b'\n' | b'\r') {
+                end -= 1;
+            }
+            counted.1 += bytes[counted.0..end]
+                .iter()
+                .filter(|&&b| b == b'\n')
+                .count() as u64;
+            counted.0 = end;
+            let line = counted.1 + 1 + meta_lines;
             let cell = |i: usize, name: &str| -> Result<f64> {
                 let at = || Location {
                     file: source.clone(),
@@ -709,6 +728,21 @@ mod tests {
             .expect_err("must fail")
             .to_string();
         assert!(s.starts_with("f.csv:2:5 (column `w`)"), "{s}");
+    }
+
+    #[test]
+    fn bom_crlf_and_comment_lines_are_read_and_lines_still_counted() {
+        let text = "\u{feff}# robot: test\r\nt,v_ref,w_ref,v,w\r\n0,1,2,3,4\r\n# note\r\n\r\n0.1,1,2,3,4\r\n0.2,1,2,3,4\r\n";
+        let r = Recording::from_csv_str(text, "b.csv").expect("parses");
+        assert_eq!(r.len(), 3);
+        assert_eq!(r.meta("robot"), Some("test"));
+        assert_eq!(r.t, [0.0, 0.1, 0.2]);
+        // The bad cell is on line 6 of the file (metadata, header, row, comment, blank, row).
+        let bad = text.replace("0.1,1,2,3,4", "0.1,1,x,3,4");
+        let e = Recording::from_csv_str(&bad, "b.csv")
+            .expect_err("bad cell")
+            .to_string();
+        assert!(e.contains("b.csv:6") && e.contains("w_ref"), "{e}");
     }
 
     #[test]

@@ -249,6 +249,7 @@ fn nominal_fit(
         &IdentifySettings {
             condition: settings.condition.clone(),
             estimator: Estimator::Ls,
+            allow_invalid: true,
             ..IdentifySettings::default()
         },
     )?;

@@ -61,6 +61,32 @@ impl TimeSource {
     }
 }
 
+/// The format of a file whose extension does not tell: MCAP by its magic bytes
+/// (`0x89 MCAP0 \\r\\n`, MCAP specification), CSV if its first 64 KiB are UTF-8 text.
+fn sniff_format(path: &Path) -> Result<ReplayFormat, RobotError> {
+    use std::io::Read;
+    let io = |source| RobotError::io(format!("reading {}", path.display()), source);
+    let mut head = Vec::with_capacity(65536);
+    std::fs::File::open(path)
+        .map_err(io)?
+        .take(65536)
+        .read_to_end(&mut head)
+        .map_err(io)?;
+    if head.starts_with(b"\x89MCAP0\r\n") {
+        return Ok(ReplayFormat::Mcap);
+    }
+    // A multi-byte character cut at the end of the window is still text.
+    match std::str::from_utf8(&head) {
+        Ok(_) => Ok(ReplayFormat::Csv),
+        Err(e) if e.error_len().is_none() => Ok(ReplayFormat::Csv),
+        Err(_) => Err(RobotError::Setting(format!(
+            "{}: neither a recording CSV (it is not UTF-8 text) nor an MCAP bag (no MCAP magic \
+             bytes); see RECORDING_FORMAT.md",
+            path.display()
+        ))),
+    }
+}
+
 /// Settings of the replay backend: which recording, and for a bag, which topics.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -115,10 +141,13 @@ impl ReplaySettings {
         }
     }
 
-    /// The format: `format` if set, else from the extension of `path` (a folder is a bag).
+    /// The format: `format` if set, else from the extension of `path` (`.csv`, `.mcap`; a
+    /// folder is a rosbag2 bag), else from the content: the MCAP magic bytes make a bag, UTF-8
+    /// text a CSV.
     ///
     /// # Errors
-    /// [`RobotError::Setting`] if the extension is neither `.csv` nor `.mcap`.
+    /// [`RobotError::Io`] if a file of another extension cannot be read;
+    /// [`RobotError::Setting`] if it is neither an MCAP bag nor text, naming the file.
     pub fn resolved_format(&self) -> Result<ReplayFormat, RobotError> {
         if let Some(f) = self.format {
             return Ok(f);
@@ -128,10 +157,7 @@ impl ReplaySettings {
             Some("csv") => Ok(ReplayFormat::Csv),
             Some("mcap") => Ok(ReplayFormat::Mcap),
             _ if self.path.is_dir() => Ok(ReplayFormat::Mcap),
-            _ => Err(RobotError::Setting(format!(
-                "{}: cannot tell the format from the extension; set format = \"csv\" or \"mcap\"",
-                self.path.display()
-            ))),
+            _ => sniff_format(&self.path),
         }
     }
 
