@@ -4,6 +4,9 @@ Rust benchmark writes when WHEELID_BENCH_CSV is set.
 
     WHEELID_BENCH_CSV=/tmp/rec1e6.csv cargo bench --bench identify
     python3 benches/identify_scipy.py /tmp/rec1e6.csv
+
+With `--once` it is the whole process a user runs (load, one identification, print), which
+`benches/identify_e2e.sh` times against `wheelid identify FILE --estimator ls`.
 """
 import sys
 import time
@@ -35,6 +38,11 @@ def identify():
     b = np.linalg.lstsq(xw, f(wr), rcond=None)[0]
     return a, b
 
+
+if "--once" in sys.argv:
+    a, b = identify()
+    print(f"theta (v: θ1 θ3 θ4) {a}, (w: θ2 θ5 θ6) {b}")
+    sys.exit(0)
 
 times = []
 for _ in range(5):

@@ -16,6 +16,7 @@
 //!    compare with the measurements (fit %, as MATLAB's `compare`); estimate θ4 and θ6 from
 //!    steady constant-command segments as the thesis's §4.1 suggests.
 
+use std::borrow::Cow;
 use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
@@ -269,17 +270,30 @@ pub fn identify(
         )));
     }
     // 1. condition
-    let restamped: Vec<Recording> = recordings
+    // Copies only where a recording changes (restamped, resampled): a 1e6-row run holds its
+    // columns once.
+    let restamped: Cow<'_, [Recording]> = if recordings
         .iter()
-        .map(condition::restamp)
-        .collect::<Result<_, _>>()?;
-    let uniform: Vec<(Recording, Option<f64>)> = restamped
+        .any(|r| r.timing() == Some(wheelid_core::Timing::WindowMiddle))
+    {
+        Cow::Owned(
+            recordings
+                .iter()
+                .map(|r| condition::restamp(r).map(Cow::into_owned))
+                .collect::<Result<_, _>>()?,
+        )
+    } else {
+        Cow::Borrowed(recordings)
+    };
+    let uniform: Vec<(Cow<'_, Recording>, Option<f64>)> = restamped
         .iter()
         .map(condition::make_uniform)
         .collect::<Result<_, _>>()?;
     let (cutoff_hz, cutoff_choice) = match settings.condition.cutoff_hz {
         Some(fc) => (fc, CutoffChoice::Given),
-        None => condition::suggest_cutoff(&uniform.iter().map(|(r, _)| r).collect::<Vec<_>>())?,
+        None => {
+            condition::suggest_cutoff(&uniform.iter().map(|(r, _)| r.as_ref()).collect::<Vec<_>>())?
+        }
     };
     let conditioned: Vec<Conditioned> = uniform
         .iter()
@@ -356,7 +370,7 @@ pub fn identify(
     // The offset δ and the recordings as output error fitted them (restamped, on their own
     // stamps), which the validation below simulates.
     let mut offset: Option<f64> = None;
-    let mut fitted_recordings = restamped.clone();
+    let mut fitted_recordings: Cow<'_, [Recording]> = Cow::Borrowed(&restamped);
     let refined = |e: Estimator| e == settings.estimator || settings.compare;
     if refined(Estimator::Iv) {
         let clock = std::time::Instant::now();
@@ -420,7 +434,7 @@ pub fn identify(
             bound_state = fit.bound_state[..p].to_vec();
             initial = fit.initial.iter().cloned().map(Some).collect();
             offset = timed.offset;
-            fitted_recordings = timed.recordings;
+            fitted_recordings = Cow::Owned(timed.recordings);
         }
         noise_std = Some(fit.noise_std.clone());
         timing = Some(timed.timing);
@@ -453,7 +467,7 @@ pub fn identify(
         if estimator != Estimator::Oe {
             initial = vec![None; conditioned.len()];
             offset = None;
-            fitted_recordings = restamped.clone();
+            fitted_recordings = Cow::Borrowed(&restamped);
         }
     }
     let ls_shift_percent = theta
@@ -469,7 +483,11 @@ pub fn identify(
     let mut all_sim = vec![Vec::new(); nch];
     let offset_params = CommandOffset::params_of(model);
     let with_offset = CommandOffset::new(model, &offset_params)?;
-    for ((c, x0), rec) in conditioned.iter().zip(initial).zip(&fitted_recordings) {
+    for ((c, x0), rec) in conditioned
+        .iter()
+        .zip(initial)
+        .zip(fitted_recordings.iter())
+    {
         let measured = vec![rec.v.clone(), rec.w.clone()];
         let x0_estimated = x0.is_some();
         let initial = match x0 {

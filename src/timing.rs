@@ -317,7 +317,7 @@ fn under(recordings: &[Recording], h: Timing) -> Result<Option<Vec<Recording>>, 
         let mut x = r.clone();
         x.set_timing(h);
         let x = condition::restamp(&x).map_err(|e| SolveError::InvalidProblem(e.to_string()))?;
-        out.push(x);
+        out.push(x.into_owned());
     }
     Ok(Some(out))
 }

@@ -25,6 +25,7 @@
 //! beyond its own roll-off, so twice the command band keeps the signal while rejecting the
 //! encoder noise above it; f_s/5 keeps the derivative stencil accurate.
 
+use std::borrow::Cow;
 use std::path::PathBuf;
 
 use crate::error::{Error, Result};
@@ -171,9 +172,9 @@ impl Conditioned {
 ///
 /// # Errors
 /// [`Error::TooShort`] for fewer than two samples of a window-middle recording.
-pub fn restamp(rec: &Recording) -> Result<Recording> {
+pub fn restamp(rec: &Recording) -> Result<Cow<'_, Recording>> {
     if rec.timing() != Some(Timing::WindowMiddle) {
-        return Ok(rec.clone());
+        return Ok(Cow::Borrowed(rec));
     }
     let n = rec.len();
     if n < 2 {
@@ -195,7 +196,7 @@ pub fn restamp(rec: &Recording) -> Result<Recording> {
     }
     out.set_timing(Timing::WindowEnd);
     out.set_meta("restamped_from", Timing::WindowMiddle.name());
-    Ok(out)
+    Ok(Cow::Owned(out))
 }
 
 /// Minimum number of samples a recording needs for a filter of this order.
@@ -204,12 +205,12 @@ pub fn min_samples(order: usize) -> usize {
     3 * (2 * order.div_ceil(2) + 1) + 1
 }
 
-/// Makes `rec` uniform (resampling if needed); returns it with the original median period if
-/// it was resampled.
+/// Makes `rec` uniform (resampling if needed; a uniform one is borrowed, not copied); returns
+/// it with the original median period if it was resampled.
 ///
 /// # Errors
 /// [`Error::TooShort`] for fewer than two samples.
-pub fn make_uniform(rec: &Recording) -> Result<(Recording, Option<f64>)> {
+pub fn make_uniform(rec: &Recording) -> Result<(Cow<'_, Recording>, Option<f64>)> {
     if rec.len() < 2 {
         return Err(Error::TooShort {
             file: rec.source.clone(),
@@ -220,9 +221,12 @@ pub fn make_uniform(rec: &Recording) -> Result<(Recording, Option<f64>)> {
     }
     let s = rec.sampling();
     if s.uniform {
-        Ok((rec.clone(), None))
+        Ok((Cow::Borrowed(rec), None))
     } else {
-        Ok((rec.resample_uniform(s.dt_median)?, Some(s.dt_median)))
+        Ok((
+            Cow::Owned(rec.resample_uniform(s.dt_median)?),
+            Some(s.dt_median),
+        ))
     }
 }
 
@@ -371,7 +375,7 @@ mod tests {
         assert_eq!(b.meta("restamped_from"), Some("window_middle"));
         // Any other convention is left alone.
         r.set_timing(Timing::Instant);
-        assert_eq!(restamp(&r).expect("as is"), r);
+        assert_eq!(*restamp(&r).expect("as is"), r);
     }
 
     fn rec(n: usize, dt: f64) -> Recording {

@@ -31,6 +31,8 @@ use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Location, Result};
 
+mod csv_read;
+
 /// How the recorded commands were applied between samples.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -406,17 +408,21 @@ impl Recording {
         Ok(())
     }
 
-    /// Reads a recording CSV file.
+    /// Reads a recording CSV file, streaming (the file is never held whole in memory).
     ///
     /// # Errors
     /// [`Error::Io`] if the file cannot be read; otherwise as [`Recording::from_csv_str`].
     pub fn read_csv(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
+        let file = std::fs::File::open(path).map_err(|source| Error::Io {
             path: path.to_owned(),
             source,
         })?;
-        Self::from_csv_str(&text, path)
+        csv_read::parse(
+            std::io::BufReader::with_capacity(1 << 20, file),
+            path.to_owned(),
+            &csv_read::Lines::File(path),
+        )
     }
 
     /// Parses recording CSV text; `source` names it in errors. A UTF-8 byte-order mark, CRLF
@@ -424,145 +430,15 @@ impl Recording {
     /// exports, hand-annotated logs); line numbers in errors count every line of the file.
     ///
     /// # Errors
-    /// [`Error::MissingColumn`], [`Error::Malformed`] (ragged rows), [`Error::BadValue`]
-    /// (not a number, NaN, ±Inf), [`Error::TimeNotIncreasing`], each naming the file, line and
-    /// column; [`Error::TooShort`] if there is no data row.
+    /// [`Error::MissingColumn`], [`Error::Malformed`] (ragged rows, text that is not UTF-8),
+    /// [`Error::BadValue`] (not a number, NaN, ±Inf), [`Error::TimeNotIncreasing`], each
+    /// naming the file, line and column; [`Error::TooShort`] if there is no data row.
     pub fn from_csv_str(text: &str, source: impl Into<PathBuf>) -> Result<Self> {
-        let source: PathBuf = source.into();
-        // A byte-order mark (spreadsheet exports) is not part of the first line.
-        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
-        let mut meta = Vec::new();
-        let mut offset = 0usize; // byte offset of the header line
-        let mut meta_lines = 0u64;
-        for line in text.split_inclusive('\n') {
-            let trimmed = line.trim_start();
-            if trimmed.starts_with('#') {
-                let body = trimmed.trim_start_matches('#').trim();
-                if let Some((k, v)) = body.split_once(':') {
-                    meta.push((k.trim().to_owned(), v.trim().to_owned()));
-                }
-            } else if !trimmed.trim().is_empty() {
-                break;
-            }
-            offset += line.len();
-            meta_lines += 1;
-        }
-        let body = &text[offset..];
-        let mut rdr = csv::ReaderBuilder::new()
-            .has_headers(true)
-            .trim(csv::Trim::All)
-            .comment(Some(b'#'))
-            .from_reader(body.as_bytes());
-        let header_line = meta_lines + 1;
-        let headers = rdr
-            .headers()
-            .map_err(|e| csv_error(&source, meta_lines, &e))?
-            .clone();
-        let header_text = headers.iter().collect::<Vec<_>>().join(",");
-        let find = |name: &str| headers.iter().position(|h| h == name);
-        let mut req_idx = [0usize; 5];
-        for (slot, name) in req_idx.iter_mut().zip(REQUIRED) {
-            *slot = find(name).ok_or_else(|| Error::MissingColumn {
-                file: source.clone(),
-                line: header_line,
-                column: name.into(),
-                header: header_text.clone(),
-            })?;
-        }
-        let opt_idx: Vec<Option<usize>> = OPTIONAL.iter().map(|n| find(n)).collect();
-        let mut req: [Vec<f64>; 5] = Default::default();
-        let mut opt: Vec<Option<Vec<f64>>> =
-            opt_idx.iter().map(|i| i.map(|_| Vec::new())).collect();
-        let mut record = csv::StringRecord::new();
-        let mut lines: Vec<u64> = Vec::new();
-        // (byte offset in `body`, newlines before it).
-        let mut counted = (0usize, 0u64);
-        loop {
-            match rdr.read_record(&mut record) {
-                Ok(false) => break,
-                Ok(true) => {}
-                Err(e) => return Err(csv_error(&source, meta_lines, &e)),
-            }
-            // The file's line: newlines counted up to the record's last byte (the reader's own
-            // count leaves out the comment and blank lines before a record).
-            let bytes = body.as_bytes();
-            let mut end = (rdr.position().byte() as usize).min(bytes.len());
-            while end > counted.0 && matches!(bytes[end - 1], b'\n' | b'\r') {
-                end -= 1;
-            }
-            counted.1 += bytes[counted.0..end]
-                .iter()
-                .filter(|&&b| b == b'\n')
-                .count() as u64;
-            counted.0 = end;
-            let line = counted.1 + 1 + meta_lines;
-            let cell = |i: usize, name: &str| -> Result<f64> {
-                let at = || Location {
-                    file: source.clone(),
-                    line,
-                    column: Some((i + 1, name.to_owned())),
-                };
-                let raw = record.get(i).unwrap_or("");
-                let x: f64 = raw.parse().map_err(|_| Error::BadValue {
-                    at: at(),
-                    message: format!("`{raw}` is not a number"),
-                })?;
-                if !x.is_finite() {
-                    return Err(Error::BadValue {
-                        at: at(),
-                        message: format!("`{raw}` is not finite"),
-                    });
-                }
-                Ok(x)
-            };
-            for ((col, &i), name) in req.iter_mut().zip(&req_idx).zip(REQUIRED) {
-                col.push(cell(i, name)?);
-            }
-            for ((col, i), name) in opt.iter_mut().zip(&opt_idx).zip(OPTIONAL) {
-                if let (Some(col), Some(i)) = (col.as_mut(), i) {
-                    col.push(cell(*i, name)?);
-                }
-            }
-            if let [.., a, b] = req[0].as_slice()
-                && b <= a
-            {
-                return Err(Error::TimeNotIncreasing {
-                    at: Location {
-                        file: source.clone(),
-                        line,
-                        column: Some((req_idx[0] + 1, "t".into())),
-                    },
-                    t: *b,
-                    previous: *a,
-                });
-            }
-            lines.push(line);
-        }
-        if lines.is_empty() {
-            return Err(Error::TooShort {
-                file: source,
-                samples: 0,
-                needed: 2,
-                why: "a recording needs data rows after the header".into(),
-            });
-        }
-        let [t, v_ref, w_ref, v, w] = req;
-        let mut opt = opt.into_iter();
-        let mut next = || opt.next().flatten();
-        Ok(Self {
-            source,
-            meta,
-            t,
-            v_ref,
-            w_ref,
-            v,
-            w,
-            x: next(),
-            y: next(),
-            phi: next(),
-            wl: next(),
-            wr: next(),
-        })
+        csv_read::parse(
+            text.as_bytes(),
+            source.into(),
+            &csv_read::Lines::Text(text.as_bytes()),
+        )
     }
 
     /// Renders the recording as CSV text (metadata lines, header, rows with full precision).
@@ -651,20 +527,6 @@ fn bracket(t: &[f64], grid: &[f64]) -> Vec<(usize, f64)> {
             }
         })
         .collect()
-}
-
-fn csv_error(file: &Path, meta_lines: u64, e: &csv::Error) -> Error {
-    let line = e
-        .position()
-        .map_or(meta_lines + 1, |p| p.line() + meta_lines);
-    Error::Malformed {
-        at: Location {
-            file: file.to_owned(),
-            line,
-            column: None,
-        },
-        message: e.to_string(),
-    }
 }
 
 #[cfg(test)]

@@ -224,12 +224,7 @@ fn solve_iv(
     let theta = &a * (z.transpose() * &reg.y);
     let e = &reg.y - &reg.x * &theta;
     let g = DMatrix::from_fn(n, k, |t, j| z[(t, j)] * e[t]);
-    let mut meat = g.transpose() * &g;
-    for l in 1..=lags.min(n - 1) {
-        let w = 1.0 - l as f64 / (lags + 1) as f64;
-        let c = g.rows(0, n - l).transpose() * g.rows(l, n - l);
-        meat += (&c + c.transpose()) * w;
-    }
+    let mut meat = crate::ols::bartlett_meat(&g, lags);
     meat *= n as f64 / (n - k) as f64;
     let cov = &a * meat * a.transpose();
     Ok((theta, cov))

@@ -777,12 +777,7 @@ fn sandwich(
                 .map(|c| jac[(off + t * nch + c, j)] * e[off + t * nch + c])
                 .sum::<f64>()
         });
-        meat += g.transpose() * &g;
-        for l in 1..=lags.min(n.saturating_sub(1)) {
-            let w = 1.0 - l as f64 / (lags + 1) as f64;
-            let c = g.rows(0, n - l).transpose() * g.rows(l, n - l);
-            meat += (&c + c.transpose()) * w;
-        }
+        meat += ols::bartlett_meat(&g, lags);
     }
     let dof = rows as f64 / (rows - k).max(1) as f64;
     &h_inv * meat * &h_inv * dof

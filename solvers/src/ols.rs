@@ -12,6 +12,16 @@
 //! residuals correlated over L samples, as filtered data are. This never forms (XᵀX)⁻¹
 //! (eq. 4.5 of the thesis), whose condition number is the square of X's.
 //!
+//! The Bartlett-weighted sum is computed in O((n + L) p²), not O(n p² L): with g_t = U_tᵀ e_t
+//! (zero outside 0 ≤ t < n) and the moving sums B_s = Σ_{t=s}^{s+L} g_t, s = −L … n−1,
+//!
+//! ```text
+//! Σ_{|l| ≤ L} (1 − |l|/(L+1)) Σ_t g_t g_{t+l}ᵀ = (1/(L+1)) Σ_s B_s B_sᵀ
+//! ```
+//!
+//! exactly, because the pair (t, u) lies in L + 1 − |t − u| of the windows (the Bartlett
+//! kernel is the autocorrelation of a box, Newey & West 1987).
+//!
 //! A singular value below `rank_tol · σ_max` makes the problem rank-deficient: the error names
 //! the parameters with weight in the corresponding right singular vectors.
 
@@ -143,19 +153,46 @@ pub(crate) fn covariance(d: &Decomposition, e: &DVector<f64>, lags: usize) -> DM
     let meat = if lags == 0 {
         DMatrix::identity(k, k) * (e.norm_squared() / dof)
     } else {
-        // Σ_l w_l Σ_t g_t g_{t+l}ᵀ with g_t = U[t,:]ᵀ e_t, scaled by n/(n−k).
+        // Σ_l w_l Σ_t g_t g_{t+l}ᵀ with g_t = U[t,:]ᵀ e_t by moving sums (module doc), scaled
+        // by n/(n−k).
         let g = DMatrix::from_fn(n, k, |t, j| d.u[(t, j)] * e[t]);
-        let mut m = g.transpose() * &g;
-        for l in 1..=lags.min(n - 1) {
-            let w = 1.0 - l as f64 / (lags + 1) as f64;
-            let top = g.rows(0, n - l);
-            let bot = g.rows(l, n - l);
-            let c = top.transpose() * bot;
-            m += (&c + c.transpose()) * w;
-        }
-        m * (n as f64 / dof)
+        bartlett_meat(&g, lags) * (n as f64 / dof)
     };
     &a * meat * a.transpose()
+}
+
+/// Σ_{|l| ≤ L} (1 − |l|/(L+1)) Σ_t g_t g_{t+l}ᵀ over the rows g_t of `g` (n × k; the result
+/// k × k, L = `lags`), by the moving-window identity of the module doc in O((n + L) k²): the
+/// Newey–West meat of least squares, instrumental variables and output error.
+pub(crate) fn bartlett_meat(g: &DMatrix<f64>, lags: usize) -> DMatrix<f64> {
+    let (n, k) = g.shape();
+    let mut m = DMatrix::<f64>::zeros(k, k);
+    let mut window = vec![0.0; k];
+    // Window s covers t = s … s + L; s runs from −L, so t = s + L enters as s advances and
+    // t = s − 1 leaves.
+    for enter in 0..n + lags {
+        if enter < n {
+            for (j, b) in window.iter_mut().enumerate() {
+                *b += g[(enter, j)];
+            }
+        }
+        if let Some(leave) = enter.checked_sub(lags + 1) {
+            for (j, b) in window.iter_mut().enumerate() {
+                *b -= g[(leave, j)];
+            }
+        }
+        for a in 0..k {
+            for b in a..k {
+                m[(a, b)] += window[a] * window[b];
+            }
+        }
+    }
+    for a in 0..k {
+        for b in 0..a {
+            m[(a, b)] = m[(b, a)];
+        }
+    }
+    m / (lags + 1) as f64
 }
 
 impl Solver for Ols {
@@ -189,6 +226,34 @@ impl Solver for Ols {
 mod tests {
     use super::*;
     use approx::assert_relative_eq;
+
+    #[test]
+    fn moving_sums_equal_the_direct_bartlett_sum() {
+        // The direct O(n k² L) sum of the Newey–West meat, against the moving-window form,
+        // for lags shorter and longer than the data.
+        let n = 57;
+        let u = DMatrix::from_fn(n, 3, |t, j| ((t * 7 + j * 13) % 11) as f64 - 5.0);
+        let e = DVector::from_fn(n, |t, _| ((t * 5) % 9) as f64 * 0.1 - 0.4);
+        for lags in [1usize, 4, 20, 80] {
+            let mut direct = DMatrix::<f64>::zeros(3, 3);
+            for t in 0..n {
+                for v in 0..n {
+                    let l = t.abs_diff(v);
+                    if l <= lags {
+                        let w = 1.0 - l as f64 / (lags + 1) as f64;
+                        for a in 0..3 {
+                            for b in 0..3 {
+                                direct[(a, b)] += w * u[(t, a)] * e[t] * u[(v, b)] * e[v];
+                            }
+                        }
+                    }
+                }
+            }
+            let g = DMatrix::from_fn(n, 3, |t, j| u[(t, j)] * e[t]);
+            let fast = bartlett_meat(&g, lags);
+            assert_relative_eq!(fast, direct, max_relative = 1e-12, epsilon = 1e-9);
+        }
+    }
 
     #[test]
     fn fits_a_line_through_three_points_with_textbook_errors() {

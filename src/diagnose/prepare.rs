@@ -335,7 +335,10 @@ pub(super) fn prepare(
     // Window-middle stamps (c) rewritten to window ends (b), which the models simulate.
     let recs: Vec<Recording> = recordings
         .iter()
-        .map(|r| condition::make_uniform(&condition::restamp(r)?).map(|(u, _)| u))
+        .map(|r| {
+            let r = condition::restamp(r)?;
+            condition::make_uniform(&r).map(|(u, _)| u.into_owned())
+        })
         .collect::<Result<_, _>>()?;
     let (train, valid) = split(&recs, settings.blocks)?;
     let dt = recs

@@ -1,0 +1,235 @@
+//! The recording CSV reader (RECORDING_FORMAT.md), streaming: the file is read through a
+//! buffer, never held whole, and each cell is parsed where it lies (no per-record string, no
+//! trim unless a cell does not parse as it is). Line numbers are found only when an error
+//! needs one, by counting the newlines before the record's last byte — the csv crate's own
+//! count leaves out the comment and blank lines it skips.
+
+use std::io::{BufRead, Read};
+use std::path::{Path, PathBuf};
+
+use super::{OPTIONAL, REQUIRED, Recording};
+use crate::error::{Error, Location, Result};
+
+/// Where an error's line number comes from: the text itself, or the file read again.
+pub(super) enum Lines<'a> {
+    /// Text in memory.
+    Text(&'a [u8]),
+    /// A file on disk, re-read on the error path only.
+    File(&'a Path),
+}
+
+impl Lines<'_> {
+    /// The 1-based line of the record whose bytes end at `end` (absolute offset in the input;
+    /// trailing line ends are skipped back over).
+    fn line_of(&self, end: u64) -> u64 {
+        let owned;
+        let bytes: &[u8] = match self {
+            Lines::Text(b) => b,
+            Lines::File(p) => {
+                owned = std::fs::read(p).unwrap_or_default();
+                &owned
+            }
+        };
+        let mut end = (end as usize).min(bytes.len());
+        while end > 0 && matches!(bytes[end - 1], b'\n' | b'\r') {
+            end -= 1;
+        }
+        bytes[..end].iter().filter(|&&b| b == b'\n').count() as u64 + 1
+    }
+}
+
+/// What precedes the rows: the metadata and the header line.
+struct Preamble {
+    /// `key: value` metadata lines.
+    meta: Vec<(String, String)>,
+    /// The header line as read (empty if the input ended first).
+    header: String,
+    /// Bytes before the header line.
+    header_offset: u64,
+    /// Lines before the header line.
+    meta_lines: u64,
+}
+
+/// Reads the metadata lines and the header line, up to and including the header.
+fn preamble(input: &mut impl BufRead, source: &Path) -> Result<Preamble> {
+    let mut meta = Vec::new();
+    let (mut consumed, mut lines) = (0u64, 0u64);
+    let mut line = String::new();
+    loop {
+        line.clear();
+        let n = input.read_line(&mut line).map_err(|e| match e.kind() {
+            std::io::ErrorKind::InvalidData => Error::Malformed {
+                at: Location {
+                    file: source.to_owned(),
+                    line: lines + 1,
+                    column: None,
+                },
+                message: "not UTF-8 text (a recording CSV is text; bags are `.mcap`)".into(),
+            },
+            _ => Error::Io {
+                path: source.to_owned(),
+                source: e,
+            },
+        })?;
+        if n == 0 {
+            return Ok(Preamble {
+                meta,
+                header: String::new(),
+                header_offset: consumed,
+                meta_lines: lines,
+            });
+        }
+        consumed += n as u64;
+        // A byte-order mark (spreadsheet exports) is not part of the first line.
+        let text = if lines == 0 {
+            line.strip_prefix('\u{feff}').unwrap_or(&line)
+        } else {
+            &line
+        };
+        let trimmed = text.trim();
+        if let Some(body) = trimmed.strip_prefix('#') {
+            if let Some((k, v)) = body.trim_start_matches('#').split_once(':') {
+                meta.push((k.trim().to_owned(), v.trim().to_owned()));
+            }
+        } else if !trimmed.is_empty() {
+            return Ok(Preamble {
+                meta,
+                header: text.to_owned(),
+                header_offset: consumed - n as u64,
+                meta_lines: lines,
+            });
+        }
+        lines += 1;
+    }
+}
+
+/// Parses a recording from `input` (see [`Recording::from_csv_str`] for the format and the
+/// errors); `source` names it, `lines` finds line numbers for errors.
+pub(super) fn parse(
+    mut input: impl BufRead,
+    source: PathBuf,
+    lines: &Lines<'_>,
+) -> Result<Recording> {
+    let Preamble {
+        meta,
+        header,
+        header_offset,
+        meta_lines,
+    } = preamble(&mut input, &source)?;
+    let header_line = meta_lines + 1;
+    let stream = std::io::Cursor::new(header.into_bytes()).chain(input);
+    let mut rdr = csv::ReaderBuilder::new()
+        .has_headers(true)
+        .comment(Some(b'#'))
+        .buffer_capacity(1 << 16)
+        .from_reader(stream);
+    let csv_error = |e: &csv::Error, end: Option<u64>| match e.kind() {
+        csv::ErrorKind::Io(io) => Error::Io {
+            path: source.clone(),
+            source: std::io::Error::new(io.kind(), io.to_string()),
+        },
+        _ => Error::Malformed {
+            at: Location {
+                file: source.clone(),
+                line: end.map_or(header_line, |b| lines.line_of(header_offset + b)),
+                column: None,
+            },
+            message: e.to_string(),
+        },
+    };
+    let headers: Vec<String> = rdr
+        .headers()
+        .map_err(|e| csv_error(&e, None))?
+        .iter()
+        .map(|h| h.trim().to_owned())
+        .collect();
+    let find = |name: &str| headers.iter().position(|h| h == name);
+    let mut req_idx = [0usize; 5];
+    for (slot, name) in req_idx.iter_mut().zip(REQUIRED) {
+        *slot = find(name).ok_or_else(|| Error::MissingColumn {
+            file: source.clone(),
+            line: header_line,
+            column: name.into(),
+            header: headers.join(","),
+        })?;
+    }
+    let opt_idx: Vec<Option<usize>> = OPTIONAL.iter().map(|n| find(n)).collect();
+    let mut req: [Vec<f64>; 5] = Default::default();
+    let mut opt: Vec<Option<Vec<f64>>> = opt_idx.iter().map(|i| i.map(|_| Vec::new())).collect();
+    let mut record = csv::ByteRecord::new();
+    loop {
+        match rdr.read_byte_record(&mut record) {
+            Ok(false) => break,
+            Ok(true) => {}
+            Err(e) => return Err(csv_error(&e, Some(rdr.position().byte()))),
+        }
+        let at = |i: usize, name: &str| Location {
+            file: source.clone(),
+            line: lines.line_of(header_offset + rdr.position().byte()),
+            column: Some((i + 1, name.to_owned())),
+        };
+        let cell = |i: usize, name: &str| -> Result<f64> {
+            let raw = record.get(i).unwrap_or_default();
+            let x = number(raw).ok_or_else(|| Error::BadValue {
+                at: at(i, name),
+                message: format!("`{}` is not a number", String::from_utf8_lossy(raw).trim()),
+            })?;
+            if x.is_finite() {
+                Ok(x)
+            } else {
+                Err(Error::BadValue {
+                    at: at(i, name),
+                    message: format!("`{}` is not finite", String::from_utf8_lossy(raw).trim()),
+                })
+            }
+        };
+        for ((col, &i), name) in req.iter_mut().zip(&req_idx).zip(REQUIRED) {
+            col.push(cell(i, name)?);
+        }
+        for ((col, i), name) in opt.iter_mut().zip(&opt_idx).zip(OPTIONAL) {
+            if let (Some(col), Some(i)) = (col.as_mut(), i) {
+                col.push(cell(*i, name)?);
+            }
+        }
+        if let [.., a, b] = req[0].as_slice()
+            && b <= a
+        {
+            return Err(Error::TimeNotIncreasing {
+                at: at(req_idx[0], "t"),
+                t: *b,
+                previous: *a,
+            });
+        }
+    }
+    if req[0].is_empty() {
+        return Err(Error::TooShort {
+            file: source,
+            samples: 0,
+            needed: 2,
+            why: "a recording needs data rows after the header".into(),
+        });
+    }
+    let [t, v_ref, w_ref, v, w] = req;
+    let mut opt = opt.into_iter();
+    let mut next = || opt.next().flatten();
+    Ok(Recording {
+        source,
+        meta,
+        t,
+        v_ref,
+        w_ref,
+        v,
+        w,
+        x: next(),
+        y: next(),
+        phi: next(),
+        wl: next(),
+        wr: next(),
+    })
+}
+
+/// A cell as a number: as it is, else with the blanks around it trimmed (`" 0.5 "`).
+fn number(raw: &[u8]) -> Option<f64> {
+    let text = std::str::from_utf8(raw).ok()?;
+    text.parse().ok().or_else(|| text.trim().parse().ok())
+}
