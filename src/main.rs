@@ -552,9 +552,13 @@ struct IdentifyArgs {
     /// Recordings: CSV (RECORDING_FORMAT.md) or ROS 2 bags (`.mcap`, a rosbag2 folder; by
     /// extension, else by content); several files are one multi-experiment identification.
     files: Vec<PathBuf>,
-    /// Model parameterization.
-    #[arg(long, default_value = "vw-pd", value_parser = models::MODEL_NAMES)]
+    /// Model parameterization: vw-pd, wheel-pd, or a model a `--plugin` registers.
+    #[arg(long, default_value = "vw-pd")]
     model: String,
+    /// Plugin library to load first (repeatable): a path, or a bare name looked up beside
+    /// this executable (as in a run config's `plugins`); its models become `--model` choices.
+    #[arg(long)]
+    plugin: Vec<PathBuf>,
     /// Estimator: ls (the thesis's filtered regression), iv (instrumental variables) or oe
     /// (output error, the default: unbiased, no cut-off in the answer).
     #[arg(long, value_enum, default_value_t = Estimator::Oe)]
@@ -590,7 +594,7 @@ struct IdentifyArgs {
 }
 
 fn run_identify(a: IdentifyArgs) -> Result<()> {
-    let model = models::by_name(&a.model).context("unknown model")?;
+    let model = wheelid::run::regressor_model(&a.model, &a.plugin)?;
     let solver = solvers::by_name(&a.solver).context("unknown solver")?;
     let (recordings, truth) = if a.files.is_empty() {
         let robot = RobotProfile::pioneer3dx();
@@ -671,9 +675,13 @@ struct DiagnoseArgs {
     /// `wheelid::config::DiagnoseConfig`); the flags below override it.
     #[arg(long)]
     config: Option<PathBuf>,
-    /// Model parameterization of the least-squares start.
-    #[arg(long, value_parser = models::MODEL_NAMES)]
+    /// Model parameterization of the least-squares start: vw-pd, wheel-pd, or a model a
+    /// `--plugin` registers.
+    #[arg(long)]
     model: Option<String>,
+    /// Plugin library to load first (repeatable), as `identify --plugin`.
+    #[arg(long)]
+    plugin: Vec<PathBuf>,
     /// Candidates to search, comma-separated (default: every registered one).
     #[arg(long, value_delimiter = ',', value_parser = clap::builder::PossibleValuesParser::new(models::Candidate::names()))]
     candidates: Option<Vec<String>>,
@@ -705,12 +713,7 @@ fn run_diagnose(a: DiagnoseArgs) -> Result<()> {
     let (cfg, base): (DiagnoseConfig, PathBuf) = read_toml_or_default(a.config.as_deref())?;
     let mut settings = cfg.settings();
     let name = a.model.clone().or(cfg.model.clone());
-    let model = models::by_name(name.as_deref().unwrap_or("vw-pd")).with_context(|| {
-        format!(
-            "unknown model {name:?}; known models: {}",
-            models::MODEL_NAMES.join(", ")
-        )
-    })?;
+    let model = wheelid::run::regressor_model(name.as_deref().unwrap_or("vw-pd"), &a.plugin)?;
     if let Some(c) = &a.candidates {
         settings.candidates = c
             .iter()

@@ -5,7 +5,7 @@
 //! identified model (TOML) and the report (text and JSON).
 //!
 //! ```toml
-//! plugins = ["target/debug/libwheelid_turtlebot_plugin.so"]  # optional; relative to this file
+//! plugins = ["wheelid_turtlebot_plugin"]  # optional: a name beside the executable, or a path
 //! duration_s = 120.0
 //!
 //! [robot]                 # type: simulator | replay | pioneer | khepera | a plugin's
@@ -479,13 +479,87 @@ impl Table<'_> {
     }
 }
 
+/// Where a `plugins` entry points: a bare library name (no directory, no extension, e.g.
+/// `"wheelid_turtlebot_plugin"`) is the platform's library file of that name
+/// (`libNAME.so`, `libNAME.dylib`, `NAME.dll`) beside the running `wheelid` executable — where
+/// `cargo build [--release] -p …` puts a workspace plugin, whichever profile both were built
+/// in; anything else is a path relative to the config file's directory `base`.
+pub fn plugin_path(base: &Path, entry: &Path) -> PathBuf {
+    let bare = entry.components().count() == 1 && entry.extension().is_none();
+    let beside_exe = std::env::current_exe()
+        .ok()
+        .and_then(|exe| exe.parent().map(Path::to_path_buf));
+    match (bare, beside_exe) {
+        (true, Some(dir)) => dir.join(format!(
+            "{}{}{}",
+            std::env::consts::DLL_PREFIX,
+            entry.display(),
+            std::env::consts::DLL_SUFFIX
+        )),
+        _ => base.join(entry),
+    }
+}
+
+/// The regression model `name` for a command line (`identify`, `diagnose` with `--plugin`): a
+/// built-in ([`MODEL_TYPES`]) or one that the plugin libraries `plugins` register (each a
+/// path, or a bare library name beside the executable: [`plugin_path`]), made from the config
+/// table `type = "name"` (the plugin's defaults).
+///
+/// # Errors
+/// A plugin that does not load (naming the file), a factory's error, or an unknown name
+/// listing the known ones.
+pub fn regressor_model(name: &str, plugins: &[PathBuf]) -> Result<Box<dyn RegressorModel>> {
+    let mut loaded = Plugins::default();
+    let builtin = BuiltIn {
+        robots: &ROBOT_TYPES,
+        models: &MODEL_TYPES,
+        solvers: &SOLVER_TYPES,
+    };
+    for p in plugins {
+        loaded.load(&plugin_path(Path::new(""), p), &builtin)?;
+    }
+    if let Some(m) = wheelid_models::by_name(name) {
+        return Ok(m);
+    }
+    match loaded.model(name) {
+        Some(e) => e
+            .make(&format!("type = {name:?}\n"))
+            .map_err(|m| anyhow!("model `{name}` of {}: {m}", e.path.display())),
+        None => {
+            let [_, from_plugins, _] = loaded.names();
+            let known: Vec<String> = MODEL_TYPES
+                .iter()
+                .map(|s| (*s).to_owned())
+                .chain(from_plugins)
+                .collect();
+            Err(anyhow!(
+                "unknown model `{name}`; known models: {} (a plugin's with --plugin LIB)",
+                known.join(", ")
+            ))
+        }
+    }
+}
+
+/// Parses a run config's `text` (as read from `path`, which names it in errors) without
+/// loading plugins or driving anything: what `wheelid run` checks first (unknown keys, types,
+/// sections), with the line and column of the first error.
+///
+/// # Errors
+/// TOML and schema errors naming `path`, line and column.
+pub fn parse_config(text: &str, path: &Path) -> Result<()> {
+    toml::from_str::<RunFile>(text)
+        .map(drop)
+        .map_err(|e| anyhow!("{}: {}", path.display(), toml_msg(text, &e)))
+}
+
 /// Runs the job described by the config file at `path`; `progress` shows a bar while the robot
 /// is driven.
 ///
 /// # Errors
 /// Config errors (file, line, section), plugin errors, robot errors, identification errors,
-/// output errors. Outputs are written only after the identification succeeded, each file
-/// atomically.
+/// output errors. The drive's recording is written as soon as the robot stops (an
+/// identification that fails never loses it); the model and the reports only after the
+/// identification succeeded; each file atomically.
 pub fn run(path: &Path, progress: bool) -> Result<RunOutput> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
@@ -504,7 +578,7 @@ pub fn run(path: &Path, progress: bool) -> Result<RunOutput> {
         solvers: &SOLVER_TYPES,
     };
     for p in &file.plugins {
-        plugins.load(&base.join(p), &builtin)?;
+        plugins.load(&plugin_path(base, p), &builtin)?;
     }
     let [plugin_robots, plugin_models, plugin_solvers] = plugins.names();
     let table = |section, table| Table {
@@ -669,7 +743,7 @@ pub fn connect_robot(path: &Path, duration_s: f64) -> Result<Box<dyn Robot>> {
         solvers: &SOLVER_TYPES,
     };
     for p in &file.plugins {
-        plugins.load(&base.join(p), &builtin)?;
+        plugins.load(&plugin_path(base, p), &builtin)?;
     }
     let [plugin_robots, _, _] = plugins.names();
     let robot_t = Table {

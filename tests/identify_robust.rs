@@ -258,3 +258,24 @@ fn every_command_has_a_one_sentence_summary() {
         .to_owned();
     assert!(first.ends_with("(CSV or ROS 2 bags)."), "{first}");
 }
+
+#[test]
+fn inputs_the_fuzzers_crashed_on_are_clear_errors() {
+    // fuzz/regressions/<reader>/: every crash a fuzzer found (fuzz/README.md), kept so that it
+    // stays fixed. mcap: attachments shorter than their own header (mcap 0.26 panicked).
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/regressions");
+    let mut n = 0;
+    for reader in std::fs::read_dir(&dir).expect("fuzz/regressions") {
+        for case in std::fs::read_dir(reader.expect("dir").path()).expect("cases") {
+            let path = case.expect("case").path();
+            let o = wheelid(&["identify", path.to_str().expect("utf8")]);
+            let e = stderr(&o);
+            assert!(!o.status.success(), "{}", path.display());
+            assert!(!e.contains("panicked"), "{}: {e}", path.display());
+            let name = path.file_name().and_then(|n| n.to_str()).expect("name");
+            assert!(e.contains(name), "the error names the file: {e}");
+            n += 1;
+        }
+    }
+    assert!(n >= 2, "{n} regression inputs");
+}

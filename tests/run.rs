@@ -79,10 +79,11 @@ fn the_khepera_over_its_serial_protocol_against_the_loopback_server_is_identifie
 
 #[test]
 fn a_ros2_bag_made_by_the_simulator_replays_and_identifies() {
-    // The bag the example config names, as its comment says to make it: encoder velocities
-    // (window averages), which the bag's `wheelid` metadata says, so no `--exact` is needed.
-    let bag = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/run/khepera.mcap");
-    std::fs::create_dir_all(bag.parent().expect("dir")).expect("mkdir");
+    // The bag the example config names is in the repository (a fresh checkout runs it); it is
+    // what its comment's command makes: encoder velocities (window averages), which the bag's
+    // `wheelid` metadata says, so no `--exact` is needed.
+    let dir = tempfile::tempdir().expect("tempdir");
+    let remade = dir.path().join("khepera_sim.mcap");
     let o = Command::new(env!("CARGO_BIN_EXE_wheelid"))
         .args([
             "simulate",
@@ -91,15 +92,22 @@ fn a_ros2_bag_made_by_the_simulator_replays_and_identifies() {
             "--excitation",
             "multisine",
             "--duration",
-            "120",
+            "40",
+            "--seed",
+            "1",
             "--out",
         ])
-        .arg(&bag)
+        .arg(&remade)
         .output()
         .expect("runs");
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let committed = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/data/khepera_sim.mcap");
+    let read = |p: &Path| wheelid::files::read_recording(p).expect("reads the bag");
+    let (a, b) = (read(&committed), read(&remade));
+    assert_eq!((&a.t, &a.v_ref, &a.w_ref), (&b.t, &b.v_ref, &b.w_ref));
+    assert_eq!((&a.v, &a.w), (&b.v, &b.w));
     let out = run(&config("run_replay_mcap.toml"), false).expect("runs");
-    assert_eq!(out.recording.len(), 6001);
+    assert_eq!(out.recording.len(), 2001);
     assert_eq!(out.recording.meta("timing"), Some("window_end"));
     assert_close(&out.identification.theta, &KHEPERA, 0.01, "mcap replay");
 }
@@ -194,6 +202,91 @@ fn plugin_config(lib: &Path, dir: &Path) -> PathBuf {
     let path = dir.join("run_plugin.toml");
     std::fs::write(&path, text).expect("write");
     path
+}
+
+#[test]
+fn every_example_config_is_a_run_config_and_the_plugin_one_runs_as_its_comment_says() {
+    // Configs for other commands live apart (examples/diagnose/); each one here parses.
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/configs");
+    let mut n = 0;
+    for entry in std::fs::read_dir(&dir).expect("examples/configs") {
+        let path = entry.expect("entry").path();
+        let text = std::fs::read_to_string(&path).expect("reads");
+        wheelid::run::parse_config(&text, &path).expect("a run config");
+        n += 1;
+    }
+    assert!(n >= 7, "{n} configs");
+    // run_plugin.toml names the plugin by its bare name, found beside the `wheelid` executable
+    // that this test run built with the workspace (same profile).
+    let _one = BUILD.lock().unwrap_or_else(|e| e.into_inner());
+    let o = Command::new(env!("CARGO_BIN_EXE_wheelid"))
+        .args(["run"])
+        .arg(config("run_plugin.toml"))
+        .output()
+        .expect("runs");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("vw-pd-coulomb"));
+}
+
+#[test]
+fn a_plugin_model_is_identified_and_diagnosed_from_the_command_line() {
+    // The plugin's robot drives (as `wheelid run` does), then its model is identified and
+    // diagnosed by `identify --plugin` and `diagnose --plugin`, which load the same library.
+    let dir = tempfile::tempdir().expect("tempdir");
+    let lib = {
+        let _one = BUILD.lock().unwrap_or_else(|e| e.into_inner());
+        build_plugin(None, dir.path())
+    };
+    let out = run(&plugin_config(&lib, dir.path()), false).expect("runs");
+    let csv = dir.path().join("burger.csv");
+    out.recording.write_csv(&csv).expect("writes");
+    let wheelid = |cmd: &str| {
+        let o = Command::new(env!("CARGO_BIN_EXE_wheelid"))
+            .arg(cmd)
+            .arg(&csv)
+            .arg("--plugin")
+            .arg(&lib)
+            .args(["--model", "vw-pd-coulomb", "--json"])
+            .output()
+            .expect("runs");
+        assert!(
+            o.status.success(),
+            "{cmd}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        serde_json::from_slice::<serde_json::Value>(&o.stdout).expect("JSON")
+    };
+    // The Burger's dry friction (examples/turtlebot-plugin/src/burger.rs): 1.962e-3 m/s,
+    // 2.453e-2 rad/s, as the plugin model's seventh and eighth parameters.
+    let id = wheelid("identify");
+    assert_eq!(id["model"], "vw-pd-coulomb");
+    let theta: Vec<f64> = id["theta"]
+        .as_array()
+        .expect("theta")
+        .iter()
+        .filter_map(serde_json::Value::as_f64)
+        .collect();
+    assert_eq!(theta.len(), 8);
+    for (x, truth) in theta[6..].iter().zip([1.962e-3, 2.453e-2]) {
+        assert!(
+            (x - truth).abs() < 0.05 * truth,
+            "identify --plugin: {x} vs {truth}"
+        );
+    }
+    // The diagnosis extends the plugin model's θ1…θ6 (eq. 2.19) and finds its friction again.
+    let d = wheelid("diagnose");
+    let f = &d["findings"][0];
+    assert_eq!(f["effect"], "coulomb_friction", "{d}");
+    let found = [
+        f["parameters"]["v_coulomb"].as_f64().expect("v"),
+        f["parameters"]["w_coulomb"].as_f64().expect("w"),
+    ];
+    for (x, truth) in found.iter().zip([1.962e-3, 2.453e-2]) {
+        assert!(
+            (x - truth).abs() < 0.05 * truth,
+            "diagnose --plugin: {x} vs {truth}"
+        );
+    }
 }
 
 #[test]

@@ -408,6 +408,7 @@ pub fn diagnose_observed(
 ) -> Result<Diagnosis, DiagnoseError> {
     let clock = Instant::now();
     validate_settings(recordings, settings)?;
+    prepare::check_model(model)?;
     let progress = Progress::new(observer, 4);
     progress.step("fitting the nominal model", 0);
     let (data, nominal_fit) = prepare(recordings, model, settings)?;

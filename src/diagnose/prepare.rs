@@ -260,12 +260,43 @@ fn nominal_fit(
     };
     let fallback = [3.0 * dt, 3.0 * dt, 0.0, 1.0, 0.0, 1.0];
     let sane = [0, 1, 3, 5].iter().all(|&i| ls.theta[i] > 0.0);
+    // A plugin's model that extends eq. 2.19 (its first six parameters θ1…θ6, then its own)
+    // starts the diagnosis from its θ1…θ6: the search extends eq. 2.19 with the candidates,
+    // which may find the plugin's own physics again.
+    let nominal;
+    let (model, start): (&dyn DynamicModel, &[f64]) = if ls.theta.len() == 6 {
+        (model, &ls.theta)
+    } else {
+        nominal = Extended::new(&[], 1.0).map_err(DiagnoseError::Core)?;
+        (&nominal, &ls.theta[..6])
+    };
     Ok(
-        match oe.fit(model, recs, if sane { &ls.theta } else { &fallback }) {
+        match oe.fit(model, recs, if sane { start } else { &fallback }) {
             Err(_) if sane => oe.fit(model, recs, &fallback)?,
             other => other?,
         },
     )
+}
+
+/// Errors unless the model's first six parameters are θ1…θ6 of eq. 2.19 (the built-in
+/// parameterizations, or a plugin's model that extends them): the candidates extend eq. 2.19.
+pub(super) fn check_model(model: &dyn RegressorModel) -> Result<(), DiagnoseError> {
+    let p = model.params();
+    let eq_2_19 = p.len() >= 6
+        && p.iter()
+            .take(6)
+            .enumerate()
+            .all(|(i, q)| q.name == format!("theta{}", i + 1));
+    if eq_2_19 {
+        Ok(())
+    } else {
+        Err(DiagnoseError::Setting(format!(
+            "model `{}` cannot be diagnosed: the candidates extend eq. 2.19, so its first six \
+             parameters must be theta1…theta6 (it has {})",
+            model.name(),
+            p.iter().map(|q| q.name).collect::<Vec<_>>().join(", ")
+        )))
+    }
 }
 
 /// Measured accelerations: the derivative of the zero-phase filtered response (zeros where

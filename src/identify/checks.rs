@@ -20,12 +20,14 @@ use super::{ChannelReport, EstimateReport, Estimator, IdentifyError};
 /// unexplained at the same level).
 pub const POOR_FIT_PERCENT: f64 = 70.0;
 
-/// Whether the parameter names are θ1…θ6 of eq. 2.19 (both built-in parameterizations; a
-/// plugin's model may have others, and then only finiteness and the covariance are checked).
+/// Whether the first six parameter names are θ1…θ6 of eq. 2.19 (both built-in
+/// parameterizations, and a plugin's model that extends them; another plugin's model gets
+/// only the finiteness and covariance checks).
 pub(super) fn is_eq_2_19(names: &[&str]) -> bool {
-    names.len() == 6
+    names.len() >= 6
         && names
             .iter()
+            .take(6)
             .enumerate()
             .all(|(i, n)| *n == format!("theta{}", i + 1))
 }

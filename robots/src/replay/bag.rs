@@ -132,11 +132,26 @@ pub fn read_mcap(
             )));
         }
     };
-    let bag = Messages::read(path, topics, time_source)?;
-    let mut rec = bag.align(path, topics, timeout_ns)?;
+    let file_name = path.display().to_string();
+    check_attachments(path)
+        .map_err(|e| RobotError::Protocol(format!("{file_name}: not a valid MCAP file: {e}")))?;
+    // The mcap crate can still panic on a malformed record the check above does not know of:
+    // a bag that makes it panic is a bad bag, not a crash.
+    let (bag, metadata) = std::panic::catch_unwind(|| {
+        (
+            Messages::read(path, topics, time_source),
+            wheelid_metadata(path),
+        )
+    })
+    .map_err(|_| {
+        RobotError::Protocol(format!(
+            "{file_name}: not a valid MCAP file (the MCAP reader failed on a malformed record)"
+        ))
+    })?;
+    let mut rec = bag?.align(path, topics, timeout_ns)?;
     // What the writer said of its stamping (a wheelid bag); a bag from a robot says nothing, and
     // nothing is claimed for it: identification estimates the convention.
-    for (key, value) in wheelid_metadata(path) {
+    for (key, value) in metadata {
         rec.set_meta(&key, value);
     }
     for (key, value) in [
@@ -150,6 +165,62 @@ pub fn read_mcap(
         rec.set_meta("command_timeout_s", s.to_string());
     }
     Ok(rec)
+}
+
+/// Checks the top-level attachment records of the MCAP file at `path`, which mcap 0.26 slices
+/// without checking (an attachment whose body is shorter than its own header says panics it;
+/// found by fuzzing, `fuzz/`): each one's body must hold its header, data and CRC. Other
+/// records are skipped over; anything else malformed is left for the reader to report.
+///
+/// Record layout (MCAP specification): opcode u8, length u64 LE, body; an attachment body is
+/// log_time u64, create_time u64, name (u32 length + bytes), media_type (likewise), data_len
+/// u64, data, crc u32.
+fn check_attachments(path: &Path) -> Result<(), String> {
+    use std::io::Read;
+    const MAGIC: usize = 8;
+    const ATTACHMENT: u8 = 0x09;
+    const FOOTER: u8 = 0x02;
+    let Ok(file) = File::open(path) else {
+        return Ok(()); // the reader reports it, naming the file
+    };
+    let mut input = BufReader::new(file);
+    let mut head = [0u8; 9];
+    if input.read_exact(&mut head[..MAGIC]).is_err() {
+        return Ok(());
+    }
+    while input.read_exact(&mut head).is_ok() {
+        let len = u64::from_le_bytes(head[1..9].try_into().unwrap_or_default());
+        if head[0] == FOOTER || len > RECORD_LENGTH_LIMIT as u64 {
+            return Ok(());
+        }
+        if head[0] != ATTACHMENT {
+            if input.seek_relative(len as i64).is_err() {
+                return Ok(());
+            }
+            continue;
+        }
+        let mut body = vec![0u8; len as usize];
+        if input.read_exact(&mut body).is_err() {
+            return Ok(());
+        }
+        attachment_fits(&body).ok_or("an attachment record is shorter than its header says")?;
+    }
+    Ok(())
+}
+
+/// Whether an attachment record's body holds its header, its data and the CRC.
+fn attachment_fits(body: &[u8]) -> Option<()> {
+    let u32_at = |at: usize| -> Option<usize> {
+        Some(u32::from_le_bytes(body.get(at..at + 4)?.try_into().ok()?) as usize)
+    };
+    let name_end = 16usize.checked_add(4)?.checked_add(u32_at(16)?)?;
+    let media_end = name_end.checked_add(4)?.checked_add(u32_at(name_end)?)?;
+    let data_len = u64::from_le_bytes(body.get(media_end..media_end + 8)?.try_into().ok()?);
+    let end = (media_end as u64)
+        .checked_add(8)?
+        .checked_add(data_len)?
+        .checked_add(4)?;
+    (end <= body.len() as u64).then_some(())
 }
 
 /// The messages of the two topics, decoded and timed, in time order.

@@ -1,0 +1,25 @@
+//! Fuzz target: the recording CSV reader (`Recording::from_csv_str`), on any bytes that are
+//! UTF-8 text, and the file reader (`Recording::read_csv`) on every input, text or not.
+//! A crash is any panic; an error is a correct answer.
+
+fn main() {
+    let path = wheelid_fuzz_path("csv");
+    afl::fuzz!(|data: &[u8]| {
+        if let Ok(text) = std::str::from_utf8(data) {
+            let _ = wheelid_core::Recording::from_csv_str(text, "fuzz.csv");
+        }
+        if std::fs::write(&path, data).is_ok() {
+            let _ = wheelid_core::Recording::read_csv(&path);
+        }
+    });
+}
+
+/// A per-process scratch file in memory-backed /dev/shm when there is one.
+fn wheelid_fuzz_path(ext: &str) -> std::path::PathBuf {
+    let dir = if std::path::Path::new("/dev/shm").is_dir() {
+        std::path::PathBuf::from("/dev/shm")
+    } else {
+        std::env::temp_dir()
+    };
+    dir.join(format!("wheelid-fuzz-{}.{ext}", std::process::id()))
+}
