@@ -216,9 +216,24 @@ fn every_example_config_is_a_run_config_and_the_plugin_one_runs_as_its_comment_s
         n += 1;
     }
     assert!(n >= 7, "{n} configs");
-    // run_plugin.toml names the plugin by its bare name, found beside the `wheelid` executable
-    // that this test run built with the workspace (same profile).
+    // run_plugin.toml names the plugin by its bare name, found beside the `wheelid` executable;
+    // its comment says to build it first in wheelid's profile, which this does (a test build
+    // leaves the library in deps/ only).
     let _one = BUILD.lock().unwrap_or_else(|e| e.into_inner());
+    let exe = Path::new(env!("CARGO_BIN_EXE_wheelid"));
+    let release = exe
+        .parent()
+        .and_then(Path::file_name)
+        .is_some_and(|p| p == "release");
+    let mut build = Command::new(env!("CARGO"));
+    build
+        .args(["build", "--locked", "-p", "wheelid-turtlebot-plugin"])
+        .current_dir(env!("CARGO_MANIFEST_DIR"));
+    if release {
+        build.arg("--release");
+    }
+    let o = build.output().expect("cargo runs");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let o = Command::new(env!("CARGO_BIN_EXE_wheelid"))
         .args(["run"])
         .arg(config("run_plugin.toml"))
