@@ -32,7 +32,7 @@ if [ ! -s "$csv" ]; then
   "$bin" simulate --robot khepera3 --excitation multisine --duration "$seconds" --seed 7 \
     --out "$csv" >/dev/null
 fi
-echo "recording: $csv, $(($(wc -l <"$csv") - 1)) lines after the header, $(du -m "$csv" | cut -f1) MB"
+echo "recording: $csv, $(($(grep -vc '^#' "$csv") - 1)) rows, $(du -m "$csv" | cut -f1) MB"
 
 # run NAME CMD…: wall seconds and peak RSS (MiB) of one process, appended to $work/NAME.
 run() {
