@@ -450,7 +450,9 @@ pub fn identify(
         });
     }
     // Never a nonsense answer: the estimate asked for, or the best valid one.
-    let eq_2_19 = checks::is_eq_2_19(&names);
+    // A plugin's model that does not extend eq. 2.19 gets the finiteness and covariance
+    // checks only.
+    let eq_2_19 = wheelid_core::extends_eq_2_19(model.params());
     for e in &mut estimates {
         e.invalid = checks::invalid(e, &e.bound_state, eq_2_19);
     }

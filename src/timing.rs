@@ -146,12 +146,7 @@ fn physical_start(model: &dyn DynamicModel, theta0: &[f64], dt: f64) -> Vec<f64>
 
 /// Whether the model's first six parameters are θ1…θ6 of eq. 2.19.
 fn six_theta(model: &dyn DynamicModel) -> bool {
-    let p = model.params();
-    p.len() >= 6
-        && p.iter()
-            .take(6)
-            .enumerate()
-            .all(|(i, q)| q.name == format!("theta{}", i + 1))
+    wheelid_core::extends_eq_2_19(model.params())
 }
 
 /// Unit gains and time constants of three periods (θ = 3Δ, 3Δ, 0, 1, 0, 1; any further

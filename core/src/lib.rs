@@ -25,7 +25,7 @@ pub use effect::{Effect, EffectChannels, Force, Probe, Search, Terms, WheelTerms
 pub use error::{Error, Location, Result};
 pub use model::{
     ChannelInfo, ChannelRegression, DynamicModel, ParamInfo, RegressorModel, Sensitivities,
-    Simulation,
+    Simulation, extends_eq_2_19,
 };
 pub use recording::{CommandHold, Recording, Timing, VelocitySampling};
 pub use robot::{Odometry, Pose, Robot, RobotError};

@@ -38,6 +38,18 @@ pub struct ParamInfo {
     pub description: &'static str,
 }
 
+/// Whether a model's parameters begin with θ1…θ6 of eq. 2.19 (`theta1` … `theta6`): the
+/// built-in parameterizations, and a plugin's model that extends them with its own. Stability,
+/// physical starts and the diagnosis's candidates are defined on those six.
+pub fn extends_eq_2_19(params: &[ParamInfo]) -> bool {
+    params.len() >= 6
+        && params
+            .iter()
+            .take(6)
+            .enumerate()
+            .all(|(i, q)| q.name == format!("theta{}", i + 1))
+}
+
 /// One output channel of a model.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
 pub struct ChannelInfo {

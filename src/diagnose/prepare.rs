@@ -282,12 +282,7 @@ fn nominal_fit(
 /// parameterizations, or a plugin's model that extends them): the candidates extend eq. 2.19.
 pub(super) fn check_model(model: &dyn RegressorModel) -> Result<(), DiagnoseError> {
     let p = model.params();
-    let eq_2_19 = p.len() >= 6
-        && p.iter()
-            .take(6)
-            .enumerate()
-            .all(|(i, q)| q.name == format!("theta{}", i + 1));
-    if eq_2_19 {
+    if wheelid_core::extends_eq_2_19(p) {
         Ok(())
     } else {
         Err(DiagnoseError::Setting(format!(

@@ -20,18 +20,6 @@ use super::{ChannelReport, EstimateReport, Estimator, IdentifyError};
 /// unexplained at the same level).
 pub const POOR_FIT_PERCENT: f64 = 70.0;
 
-/// Whether the first six parameter names are θ1…θ6 of eq. 2.19 (both built-in
-/// parameterizations, and a plugin's model that extends them; another plugin's model gets
-/// only the finiteness and covariance checks).
-pub(super) fn is_eq_2_19(names: &[&str]) -> bool {
-    names.len() >= 6
-        && names
-            .iter()
-            .take(6)
-            .enumerate()
-            .all(|(i, n)| *n == format!("theta{}", i + 1))
-}
-
 /// Errors unless some recording's v_ref and some recording's ω_ref change: a constant
 /// command leaves its channel's parameters without information (its regressors are noise;
 /// without noise least squares would find the channel rank-deficient and say which
