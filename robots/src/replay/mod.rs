@@ -65,7 +65,14 @@ impl TimeSource {
 /// (`0x89 MCAP0 \\r\\n`, MCAP specification), CSV if its first 64 KiB are UTF-8 text.
 fn sniff_format(path: &Path) -> Result<ReplayFormat, RobotError> {
     use std::io::Read;
-    let io = |source| RobotError::io(format!("reading {}", path.display()), source);
+    // Neither the extension nor (unreadable) the content tells: the setting is missing.
+    let io = |e: std::io::Error| {
+        RobotError::Setting(format!(
+            "{}: cannot tell the format from the extension, nor from the content ({e}); set \
+             format = \"csv\" or \"mcap\"",
+            path.display()
+        ))
+    };
     let mut head = Vec::with_capacity(65536);
     std::fs::File::open(path)
         .map_err(io)?
@@ -146,8 +153,8 @@ impl ReplaySettings {
     /// text a CSV.
     ///
     /// # Errors
-    /// [`RobotError::Io`] if a file of another extension cannot be read;
-    /// [`RobotError::Setting`] if it is neither an MCAP bag nor text, naming the file.
+    /// [`RobotError::Setting`], naming the file, if a file of another extension cannot be read
+    /// or is neither an MCAP bag nor text.
     pub fn resolved_format(&self) -> Result<ReplayFormat, RobotError> {
         if let Some(f) = self.format {
             return Ok(f);
