@@ -61,8 +61,11 @@ pub enum ReadError {
 /// [`ReadError`], naming the file.
 pub fn read_recording(path: &Path) -> Result<Recording, ReadError> {
     use wheelid_robots::replay::{ReplayFormat, ReplaySettings};
-    let settings = ReplaySettings::new(path);
-    match settings.resolved_format()? {
+    let mut settings = ReplaySettings::new(path);
+    // Told once (a sniff reads the file's head), then kept for the load.
+    let format = settings.resolved_format()?;
+    settings.format = Some(format);
+    match format {
         ReplayFormat::Csv => Ok(Recording::read_csv(path)?),
         ReplayFormat::Mcap => Ok(settings.load()?),
     }
