@@ -488,7 +488,8 @@ fn wheelid_metadata(path: &Path) -> Vec<(String, String)> {
     let Ok(reader) = ::mcap::read::LinearReader::new(&bytes) else {
         return Vec::new();
     };
-    for record in reader.flatten() {
+    // The reader repeats its error on a damaged bag rather than ending: stop at the first.
+    for record in reader.map_while(Result::ok) {
         if let ::mcap::records::Record::Metadata(m) = record
             && m.name == METADATA_NAME
         {
