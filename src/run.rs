@@ -500,6 +500,24 @@ pub fn plugin_path(base: &Path, entry: &Path) -> PathBuf {
     }
 }
 
+/// Loads the plugin libraries `entries` ([`plugin_path`] against `base`), refusing names that
+/// clash with the built-in robots, models and solvers or with each other.
+///
+/// # Errors
+/// The first [`crate::plugins::PluginError`], naming its file.
+fn load_plugins(base: &Path, entries: &[PathBuf]) -> Result<Plugins> {
+    let mut plugins = Plugins::default();
+    let builtin = BuiltIn {
+        robots: &ROBOT_TYPES,
+        models: &MODEL_TYPES,
+        solvers: &SOLVER_TYPES,
+    };
+    for p in entries {
+        plugins.load(&plugin_path(base, p), &builtin)?;
+    }
+    Ok(plugins)
+}
+
 /// The regression model `name` for a command line (`identify`, `diagnose` with `--plugin`): a
 /// built-in ([`MODEL_TYPES`]) or one that the plugin libraries `plugins` register (each a
 /// path, or a bare library name beside the executable: [`plugin_path`]), made from the config
@@ -509,15 +527,7 @@ pub fn plugin_path(base: &Path, entry: &Path) -> PathBuf {
 /// A plugin that does not load (naming the file), a factory's error, or an unknown name
 /// listing the known ones.
 pub fn regressor_model(name: &str, plugins: &[PathBuf]) -> Result<Box<dyn RegressorModel>> {
-    let mut loaded = Plugins::default();
-    let builtin = BuiltIn {
-        robots: &ROBOT_TYPES,
-        models: &MODEL_TYPES,
-        solvers: &SOLVER_TYPES,
-    };
-    for p in plugins {
-        loaded.load(&plugin_path(Path::new(""), p), &builtin)?;
-    }
+    let loaded = load_plugins(Path::new(""), plugins)?;
     if let Some(m) = wheelid_models::by_name(name) {
         return Ok(m);
     }
@@ -571,15 +581,7 @@ pub fn run(path: &Path, progress: bool) -> Result<RunOutput> {
         duration_s: file.duration_s.unwrap_or(150.0),
     };
     // Plugins first: they may provide any of the three.
-    let mut plugins = Plugins::default();
-    let builtin = BuiltIn {
-        robots: &ROBOT_TYPES,
-        models: &MODEL_TYPES,
-        solvers: &SOLVER_TYPES,
-    };
-    for p in &file.plugins {
-        plugins.load(&plugin_path(base, p), &builtin)?;
-    }
+    let plugins = load_plugins(base, &file.plugins)?;
     let [plugin_robots, plugin_models, plugin_solvers] = plugins.names();
     let table = |section, table| Table {
         section,
@@ -736,15 +738,7 @@ pub fn connect_robot(path: &Path, duration_s: f64) -> Result<Box<dyn Robot>> {
         .map_err(|e| anyhow!("{}: {}", path.display(), toml_msg(&text, &e)))?;
     let base = path.parent().unwrap_or(Path::new(""));
     let cx = RunContext { base, duration_s };
-    let mut plugins = Plugins::default();
-    let builtin = BuiltIn {
-        robots: &ROBOT_TYPES,
-        models: &MODEL_TYPES,
-        solvers: &SOLVER_TYPES,
-    };
-    for p in &file.plugins {
-        plugins.load(&plugin_path(base, p), &builtin)?;
-    }
+    let plugins = load_plugins(base, &file.plugins)?;
     let [plugin_robots, _, _] = plugins.names();
     let robot_t = Table {
         section: "robot",

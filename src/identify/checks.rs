@@ -36,17 +36,13 @@ pub(super) fn check_excitation(recordings: &[Recording]) -> Result<(), IdentifyE
             });
         hi - lo <= 1e-12 * (1.0 + hi.abs().max(lo.abs()))
     };
-    for (name, params, pick) in [
-        ("v_ref", "θ1, θ3, θ4", 0usize),
-        ("w_ref", "θ2, θ5, θ6", 1usize),
-    ] {
-        let all_constant = recordings.iter().all(|r| {
-            constant(if pick == 0 {
-                r.v_ref.as_slice()
-            } else {
-                r.w_ref.as_slice()
-            })
-        });
+    type Column = fn(&Recording) -> &[f64];
+    let commands: [(&str, &str, Column); 2] = [
+        ("v_ref", "θ1, θ3, θ4", |r| &r.v_ref),
+        ("w_ref", "θ2, θ5, θ6", |r| &r.w_ref),
+    ];
+    for (name, params, column) in commands {
+        let all_constant = recordings.iter().all(|r| constant(column(r)));
         if all_constant {
             let files: Vec<String> = recordings
                 .iter()

@@ -3,7 +3,7 @@
 //! A crash is any panic; an error is a correct answer.
 
 fn main() {
-    let path = wheelid_fuzz_path("csv");
+    let path = wheelid_fuzz::scratch_path("csv");
     afl::fuzz!(|data: &[u8]| {
         if let Ok(text) = std::str::from_utf8(data) {
             let _ = wheelid_core::Recording::from_csv_str(text, "fuzz.csv");
@@ -12,14 +12,4 @@ fn main() {
             let _ = wheelid_core::Recording::read_csv(&path);
         }
     });
-}
-
-/// A per-process scratch file in memory-backed /dev/shm when there is one.
-fn wheelid_fuzz_path(ext: &str) -> std::path::PathBuf {
-    let dir = if std::path::Path::new("/dev/shm").is_dir() {
-        std::path::PathBuf::from("/dev/shm")
-    } else {
-        std::env::temp_dir()
-    };
-    dir.join(format!("wheelid-fuzz-{}.{ext}", std::process::id()))
 }

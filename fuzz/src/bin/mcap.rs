@@ -5,12 +5,7 @@
 use wheelid_robots::replay::{BagTopics, TimeSource, read_mcap};
 
 fn main() {
-    let dir = if std::path::Path::new("/dev/shm").is_dir() {
-        std::path::PathBuf::from("/dev/shm")
-    } else {
-        std::env::temp_dir()
-    };
-    let path = dir.join(format!("wheelid-fuzz-{}.mcap", std::process::id()));
+    let path = wheelid_fuzz::scratch_path("mcap");
     let topics = BagTopics::default();
     afl::fuzz!(|data: &[u8]| {
         if std::fs::write(&path, data).is_ok() {

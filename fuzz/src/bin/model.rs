@@ -2,12 +2,7 @@
 //! `simulate --model`, `migrate` and `export` read) and the bounds file reader.
 
 fn main() {
-    let dir = if std::path::Path::new("/dev/shm").is_dir() {
-        std::path::PathBuf::from("/dev/shm")
-    } else {
-        std::env::temp_dir()
-    };
-    let path = dir.join(format!("wheelid-fuzz-{}.toml", std::process::id()));
+    let path = wheelid_fuzz::scratch_path("toml");
     afl::fuzz!(|data: &[u8]| {
         if std::fs::write(&path, data).is_ok() {
             if let Ok(m) = wheelid::files::ModelFile::read(&path) {
