@@ -20,18 +20,18 @@ use std::borrow::Cow;
 use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
-use wheelid_core::DynamicModel;
-use wheelid_core::condition::{self, ConditionSettings, CutoffChoice};
+use wheelid_core::condition::{ConditionSettings, CutoffChoice};
 use wheelid_core::{
-    BoundState, ChannelRegression, Conditioned, LinearProblem, Recording, RegressorModel,
-    SolveError, SolveStatus, Solver, metrics,
+    BoundState, ChannelRegression, Conditioned, Recording, RegressorModel, SolveError, SolveStatus,
+    Solver,
 };
-use wheelid_models::CommandOffset;
-use wheelid_solvers::{InstrumentalVariables, OutputError};
 
-use crate::timing::{TimingReport, fit_with_timing};
+use crate::timing::TimingReport;
 
 mod checks;
+mod estimators;
+mod prepare;
+mod validation;
 pub use checks::POOR_FIT_PERCENT;
 
 /// Errors of an identification run.
@@ -256,198 +256,26 @@ pub fn identify(
     solver: &dyn Solver,
     settings: &IdentifySettings,
 ) -> Result<Identification, IdentifyError> {
-    if recordings.is_empty() {
-        return Err(IdentifyError::Setting("no recording given".into()));
-    }
-    if let Some(b) = &settings.bounds
-        && b.len() != model.params().len()
-    {
-        return Err(IdentifyError::Setting(format!(
-            "{} bounds given for the {} parameters of model `{}`",
-            b.len(),
-            model.params().len(),
-            model.name()
-        )));
-    }
+    check_settings(recordings, model, settings)?;
     // 1. condition
-    // Copies only where a recording changes (restamped, resampled): a 1e6-row run holds its
-    // columns once.
-    let restamped: Cow<'_, [Recording]> = if recordings
-        .iter()
-        .any(|r| r.timing() == Some(wheelid_core::Timing::WindowMiddle))
-    {
-        Cow::Owned(
-            recordings
-                .iter()
-                .map(|r| condition::restamp(r).map(Cow::into_owned))
-                .collect::<Result<_, _>>()?,
-        )
-    } else {
-        Cow::Borrowed(recordings)
-    };
-    let uniform: Vec<(Cow<'_, Recording>, Option<f64>)> = restamped
-        .iter()
-        .map(condition::make_uniform)
-        .collect::<Result<_, _>>()?;
-    let (cutoff_hz, cutoff_choice) = match settings.condition.cutoff_hz {
-        Some(fc) => (fc, CutoffChoice::Given),
-        None => {
-            condition::suggest_cutoff(&uniform.iter().map(|(r, _)| r.as_ref()).collect::<Vec<_>>())?
-        }
-    };
-    let conditioned: Vec<Conditioned> = uniform
-        .iter()
-        .map(|(r, from)| condition::condition(r, *from, cutoff_hz, &settings.condition))
-        .collect::<Result<_, _>>()?;
-    // 2. model
-    let per_file: Vec<Vec<ChannelRegression>> = conditioned
-        .iter()
-        .map(|c| model.regression(c))
-        .collect::<Result<_, _>>()?;
-    let regressions = ChannelRegression::stack(&per_file);
-    // 3. fit: least squares, then the chosen estimator from there.
-    let p = model.params().len();
-    let names: Vec<&str> = model.params().iter().map(|q| q.name).collect();
-    let mut theta = vec![0.0; p];
-    let mut std_err = vec![0.0; p];
-    let mut bound_state = vec![BoundState::Free; p];
-    let mut channel_quality = Vec::new();
-    // Residuals of filtered data are correlated over about one filter time constant.
-    let lags = conditioned
-        .iter()
-        .map(|c| (1.0 / (c.dt * cutoff_hz)).ceil() as usize)
-        .max()
-        .unwrap_or(0);
-    let clock = std::time::Instant::now();
-    for reg in &regressions {
-        let ch_names: Vec<&str> = reg.params.iter().map(|&i| names[i]).collect();
-        let ch_bounds: Option<Vec<(f64, f64)>> = settings
-            .bounds
-            .as_ref()
-            .map(|b| reg.params.iter().map(|&i| b[i]).collect());
-        let problem = LinearProblem {
-            x: &reg.x,
-            y: &reg.y,
-            names: &ch_names,
-            bounds: ch_bounds.as_deref(),
-            correlation_lags: lags,
-        };
-        let fit = solver
-            .solve(&problem)
-            .map_err(|source| IdentifyError::Solve {
-                channel: reg.channel.into(),
-                source,
-            })?;
-        for (j, &i) in reg.params.iter().enumerate() {
-            theta[i] = fit.theta[j];
-            std_err[i] = fit.std_err[j];
-            bound_state[i] = fit.bound_state[j];
-        }
-        let yhat = &reg.x * &fit.theta;
-        channel_quality.push((
-            metrics::r_squared(reg.y.as_slice(), yhat.as_slice()),
-            fit.condition_number,
-            reg.y.len(),
-        ));
-    }
+    let data = prepare::prepare(recordings, settings)?;
+    // 2.–3. model and fit: least squares, then the refining estimators asked for.
+    let ls = estimators::least_squares(model, solver, &data, settings)?;
     // A constant command whose channel least squares still solved (noise makes the
     // regressors full rank) is no information either.
     checks::check_excitation(recordings)?;
-    let ls = EstimateReport {
-        estimator: Estimator::Ls,
-        theta: theta.clone(),
-        std_err: std_err.clone(),
-        status: SolveStatus::Solved,
-        bound_state: bound_state.clone(),
-        invalid: None,
-        iterations: 1,
-        seconds: clock.elapsed().as_secs_f64(),
-    };
-    let mut estimates = vec![ls.clone()];
-    let mut initial: Vec<Option<Vec<f64>>> = vec![None; conditioned.len()];
-    let mut noise_std = None;
-    let mut timing = None;
-    // The offset δ and the recordings as output error fitted them (restamped, on their own
-    // stamps), which the validation below simulates.
-    let mut offset: Option<f64> = None;
-    let mut fitted_recordings: Cow<'_, [Recording]> = Cow::Borrowed(&restamped);
-    let refined = |e: Estimator| e == settings.estimator || settings.compare;
-    if refined(Estimator::Iv) {
-        let clock = std::time::Instant::now();
-        let fit = InstrumentalVariables::default()
-            .fit(
-                model,
-                &conditioned,
-                &ls.theta,
-                cutoff_hz,
-                &settings.condition,
-                lags,
-            )
-            .map_err(|source| IdentifyError::Solve {
-                channel: "iv".into(),
-                source,
-            })?;
-        let mut th = fit.theta.clone();
-        let mut bs = vec![BoundState::Free; p];
-        if let Some(b) = &settings.bounds {
-            for i in 0..p {
-                if th[i] < b[i].0 {
-                    th[i] = b[i].0;
-                    bs[i] = BoundState::AtLower;
-                } else if th[i] > b[i].1 {
-                    th[i] = b[i].1;
-                    bs[i] = BoundState::AtUpper;
-                }
-            }
+    let mut estimates = vec![ls.report.clone()];
+    let (mut free_runs, mut noise_std, mut timing) = (Vec::new(), None, None);
+    for refiner in estimators::REFINERS {
+        let e = refiner.estimator();
+        if e != settings.estimator && !settings.compare {
+            continue;
         }
-        if settings.estimator == Estimator::Iv {
-            theta.clone_from(&th);
-            std_err.clone_from(&fit.std_err);
-            bound_state.clone_from(&bs);
-        }
-        estimates.push(EstimateReport {
-            estimator: Estimator::Iv,
-            theta: th,
-            std_err: fit.std_err,
-            status: fit.status,
-            bound_state: bs,
-            invalid: None,
-            iterations: fit.iterations,
-            seconds: clock.elapsed().as_secs_f64(),
-        });
-    }
-    if refined(Estimator::Oe) {
-        let oe = OutputError {
-            bounds: settings.bounds.clone(),
-            ..OutputError::default()
-        };
-        let timed = fit_with_timing(model, &restamped, &ls.theta, &oe).map_err(|source| {
-            IdentifyError::Solve {
-                channel: "oe".into(),
-                source,
-            }
-        })?;
-        let fit = timed.fit;
-        if settings.estimator == Estimator::Oe {
-            theta = fit.theta[..p].to_vec();
-            std_err = fit.std_err[..p].to_vec();
-            bound_state = fit.bound_state[..p].to_vec();
-            initial = fit.initial.iter().cloned().map(Some).collect();
-            offset = timed.offset;
-            fitted_recordings = Cow::Owned(timed.recordings);
-        }
-        noise_std = Some(fit.noise_std.clone());
-        timing = Some(timed.timing);
-        estimates.push(EstimateReport {
-            estimator: Estimator::Oe,
-            theta: fit.theta[..p].to_vec(),
-            std_err: fit.std_err[..p].to_vec(),
-            status: fit.status,
-            bound_state: fit.bound_state[..p].to_vec(),
-            invalid: None,
-            iterations: fit.evaluations,
-            seconds: fit.seconds,
-        });
+        let refined = refiner.refine(model, &data, &ls.report.theta, settings)?;
+        noise_std = refined.noise_std.or(noise_std);
+        timing = refined.timing.or(timing);
+        free_runs.extend(refined.free_run.map(|f| (e, f)));
+        estimates.push(refined.report);
     }
     // Never a nonsense answer: the estimate asked for, or the best valid one.
     // A plugin's model that does not extend eq. 2.19 gets the finiteness and covariance
@@ -458,95 +286,48 @@ pub fn identify(
     }
     let (estimator, mut warnings) =
         checks::choose(&estimates, settings.estimator, settings.allow_invalid)?;
-    if estimator != settings.estimator {
-        let e = estimates
-            .iter()
-            .find(|e| e.estimator == estimator)
-            .ok_or_else(|| IdentifyError::Setting("the fallback estimate is missing".into()))?;
-        theta.clone_from(&e.theta);
-        std_err.clone_from(&e.std_err);
-        bound_state.clone_from(&e.bound_state);
-        if estimator != Estimator::Oe {
-            initial = vec![None; conditioned.len()];
-            offset = None;
-            fitted_recordings = Cow::Borrowed(&restamped);
-        }
-    }
+    let chosen = estimates
+        .iter()
+        .find(|e| e.estimator == estimator)
+        .ok_or_else(|| IdentifyError::Setting("the chosen estimate is missing".into()))?;
+    let (theta, std_err, bound_state) = (
+        chosen.theta.clone(),
+        chosen.std_err.clone(),
+        chosen.bound_state.clone(),
+    );
     let ls_shift_percent = theta
         .iter()
-        .zip(&ls.theta)
+        .zip(&ls.report.theta)
         .map(|(t, l)| 100.0 * (t - l) / l.abs())
         .collect();
-    // 4. validate: free-run simulation per recording.
-    let nch = model.channels().len();
-    let mut series = Vec::new();
-    let mut files = Vec::new();
-    let mut all_meas = vec![Vec::new(); nch];
-    let mut all_sim = vec![Vec::new(); nch];
-    let offset_params = CommandOffset::params_of(model);
-    let with_offset = CommandOffset::new(model, &offset_params)?;
-    for ((c, x0), rec) in conditioned
-        .iter()
-        .zip(initial)
-        .zip(fitted_recordings.iter())
-    {
-        let measured = vec![rec.v.clone(), rec.w.clone()];
-        let x0_estimated = x0.is_some();
-        let initial = match x0 {
-            Some(x) => x,
-            None => vec![c.smooth(&c.v)?[0], c.smooth(&c.w)?[0]],
-        };
-        let simulated = match offset {
-            Some(d) => {
-                let mut th = theta.clone();
-                th.push(d);
-                with_offset.simulate(&th, rec, &initial)?
-            }
-            None => model.simulate(&theta, rec, &initial)?,
-        };
-        // A window-averaged recording's first sample averages over a window before it began,
-        // under commands it does not hold: out of output error's cost, so out of the fit too
-        // (its estimated initial state is free to miss it).
-        let skip = usize::from(
-            rec.velocity_sampling() == wheelid_core::VelocitySampling::WindowAverage
-                && x0_estimated,
-        );
-        let fits: Vec<f64> = (0..nch)
-            .map(|ch| metrics::fit_percent(&measured[ch][skip..], &simulated[ch][skip..]))
-            .collect();
-        for ch in 0..nch {
-            all_meas[ch].extend_from_slice(&measured[ch][skip..]);
-            all_sim[ch].extend_from_slice(&simulated[ch][skip..]);
-        }
-        files.push(FileReport {
-            source: c.source.clone(),
-            samples: rec.len(),
-            dt: c.dt,
-            resampled_from: c.resampled_from,
-            fit_percent: fits,
-            initial,
-        });
-        series.push(FileSeries {
-            source: c.source.clone(),
-            t: rec.t.clone(),
-            measured,
-            simulated,
-        });
-    }
-    let channels: Vec<ChannelReport> = model
-        .channels()
-        .iter()
-        .zip(&channel_quality)
-        .enumerate()
-        .map(|(ch, (info, &(r2, cond, n)))| ChannelReport {
-            name: info.name.into(),
-            r2,
-            fit_percent: metrics::fit_percent(&all_meas[ch], &all_sim[ch]),
-            condition_number: cond,
-            samples: n,
-        })
-        .collect();
-    let (steady_theta4, steady_theta6) = steady_state(&conditioned, &theta);
+    // 4. validate: free-run simulation per recording, as the chosen estimator fitted them.
+    let free_run = free_runs.into_iter().find(|(e, _)| *e == estimator);
+    let (initial, offset, fitted): (_, _, Cow<'_, [Recording]>) = match free_run {
+        Some((_, f)) => (
+            f.initial.into_iter().map(Some).collect(),
+            f.offset,
+            Cow::Owned(f.recordings),
+        ),
+        None => (
+            vec![None; data.conditioned.len()],
+            None,
+            Cow::Borrowed(&*data.restamped),
+        ),
+    };
+    let validation::Validation {
+        files,
+        series,
+        channels,
+    } = validation::validate(
+        model,
+        &theta,
+        &data.conditioned,
+        &fitted,
+        initial,
+        offset,
+        &ls.quality,
+    )?;
+    let (steady_theta4, steady_theta6) = steady_state(&data.conditioned, &theta);
     let dt = files.iter().map(|f| f.dt).fold(f64::INFINITY, f64::min);
     if eq_2_19 {
         warnings.extend(checks::lag_notices(&theta, dt));
@@ -560,23 +341,43 @@ pub fn identify(
         estimates,
         ls_shift_percent,
         noise_std,
-        param_names: names.iter().map(|s| (*s).to_owned()).collect(),
+        param_names: model.params().iter().map(|q| q.name.to_owned()).collect(),
         param_units: model.params().iter().map(|q| q.unit.to_owned()).collect(),
         theta,
         std_err,
         bound_state,
-        cutoff_hz,
-        cutoff_choice,
+        cutoff_hz: data.cutoff_hz,
+        cutoff_choice: data.cutoff_choice,
         filter_order: settings.condition.order,
-        samples: conditioned.iter().map(Conditioned::len).sum(),
+        samples: data.conditioned.iter().map(Conditioned::len).sum(),
         channels,
         files,
         steady_theta4,
         steady_theta6,
         series,
-        regressions,
+        regressions: ls.regressions,
         timing,
     })
+}
+
+/// At least one recording, and bounds (when given) for each of the model's parameters.
+fn check_settings(
+    recordings: &[Recording],
+    model: &dyn RegressorModel,
+    settings: &IdentifySettings,
+) -> Result<(), IdentifyError> {
+    if recordings.is_empty() {
+        return Err(IdentifyError::Setting("no recording given".into()));
+    }
+    match &settings.bounds {
+        Some(b) if b.len() != model.params().len() => Err(IdentifyError::Setting(format!(
+            "{} bounds given for the {} parameters of model `{}`",
+            b.len(),
+            model.params().len(),
+            model.name()
+        ))),
+        _ => Ok(()),
+    }
 }
 
 /// θ4 and θ6 from constant-command segments (thesis §4.1): in a segment where v_ref and ω_ref
