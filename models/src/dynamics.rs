@@ -617,6 +617,26 @@ pub fn simulate_with_sensitivities(
 mod tests {
     use super::*;
 
+    /// A recording of `t`, held commands `vr`, `wr` (zero-order hold) and zero outputs, its
+    /// velocities window averages when `avg`, else instants.
+    fn zoh_recording(t: &[f64], vr: &[f64], wr: &[f64], avg: bool) -> Recording {
+        let n = t.len();
+        let mut rec = Recording::new(
+            "zoh",
+            t.to_vec(),
+            vr.to_vec(),
+            wr.to_vec(),
+            vec![0.0; n],
+            vec![0.0; n],
+        )
+        .expect("valid");
+        rec.set_meta("command_hold", "zoh");
+        if avg {
+            rec.set_meta("velocity_sampling", "window_average");
+        }
+        rec
+    }
+
     /// Straight-drive step response (ω = 0): θ1 v̇ = u − θ4 v → v(t) = (u/θ4)(1 − e^{−θ4 t/θ1}).
     /// Returns the largest error relative to the final value u/θ4, checking ω stays 0.
     fn step_error(theta: [f64; 6], dt: f64, u: f64) -> f64 {
@@ -753,20 +773,9 @@ mod tests {
         let t: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
         let tau = theta[0] / theta[3];
         let gain = u / theta[3];
+        let (vr, wr) = (vec![u; n], vec![0.0; n]);
         for avg in [false, true] {
-            let mut rec = Recording::new(
-                "stiff",
-                t.clone(),
-                vec![u; n],
-                vec![0.0; n],
-                vec![0.0; n],
-                vec![0.0; n],
-            )
-            .expect("valid");
-            rec.set_meta("command_hold", "zoh");
-            if avg {
-                rec.set_meta("velocity_sampling", "window_average");
-            }
+            let rec = zoh_recording(&t, &vr, &wr, avg);
             let [v, w] = simulate(&theta, &rec, &[0.0, 0.0]).expect("sim");
             assert!(w.iter().all(|x| *x == 0.0));
             for k in 1..n {
@@ -800,19 +809,7 @@ mod tests {
             [a, b]
         };
         for avg in [false, true] {
-            let mut rec = Recording::new(
-                "turn",
-                t.clone(),
-                vr.clone(),
-                wr.clone(),
-                vec![0.0; n],
-                vec![0.0; n],
-            )
-            .expect("valid");
-            rec.set_meta("command_hold", "zoh");
-            if avg {
-                rec.set_meta("velocity_sampling", "window_average");
-            }
+            let rec = zoh_recording(&t, &vr, &wr, avg);
             let y = simulate(&theta, &rec, &[0.1, 0.0]).expect("sim");
             let mut x = [0.1, 0.0];
             for k in 1..n {
@@ -857,19 +854,7 @@ mod tests {
         let vr: Vec<f64> = t.iter().map(|&x| 0.4 + 0.3 * (1.3 * x).sin()).collect();
         let wr: Vec<f64> = t.iter().map(|&x| 1.2 * (0.7 * x).cos()).collect();
         for avg in [false, true] {
-            let mut rec = Recording::new(
-                "s",
-                t.clone(),
-                vr.clone(),
-                wr.clone(),
-                vec![0.0; n],
-                vec![0.0; n],
-            )
-            .expect("valid");
-            rec.set_meta("command_hold", "zoh");
-            if avg {
-                rec.set_meta("velocity_sampling", "window_average");
-            }
+            let rec = zoh_recording(&t, &vr, &wr, avg);
             let x0 = [0.1, -0.2];
             let (y, s) = simulate_with_sensitivities(&theta, &rec, &x0).expect("sim");
             let plain = simulate(&theta, &rec, &x0).expect("sim");
