@@ -262,7 +262,8 @@ fn every_command_has_a_one_sentence_summary() {
 #[test]
 fn inputs_the_fuzzers_crashed_on_are_clear_errors() {
     // fuzz/regressions/<reader>/: every crash a fuzzer found (fuzz/README.md), kept so that it
-    // stays fixed. mcap: attachments shorter than their own header (mcap 0.26 panicked).
+    // stays fixed. mcap: attachments shorter than their own header, an uncompressed chunk's
+    // record running past the chunk (mcap 0.26 panicked on both).
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/regressions");
     let mut n = 0;
     for reader in std::fs::read_dir(&dir).expect("fuzz/regressions") {

@@ -179,6 +179,7 @@ fn check_attachments(path: &Path) -> Result<(), String> {
     use std::io::Read;
     const MAGIC: usize = 8;
     const ATTACHMENT: u8 = 0x09;
+    const CHUNK: u8 = 0x06;
     const FOOTER: u8 = 0x02;
     let Ok(file) = File::open(path) else {
         return Ok(()); // the reader reports it, naming the file
@@ -193,7 +194,7 @@ fn check_attachments(path: &Path) -> Result<(), String> {
         if head[0] == FOOTER || len > RECORD_LENGTH_LIMIT as u64 {
             return Ok(());
         }
-        if head[0] != ATTACHMENT {
+        if head[0] != ATTACHMENT && head[0] != CHUNK {
             if input.seek_relative(len as i64).is_err() {
                 return Ok(());
             }
@@ -203,9 +204,45 @@ fn check_attachments(path: &Path) -> Result<(), String> {
         if input.read_exact(&mut body).is_err() {
             return Ok(());
         }
-        attachment_fits(&body).ok_or("an attachment record is shorter than its header says")?;
+        if head[0] == ATTACHMENT {
+            attachment_fits(&body).ok_or("an attachment record is shorter than its header says")?;
+        } else {
+            chunk_records_fit(&body).ok_or("a chunk's record runs past the chunk")?;
+        }
     }
     Ok(())
+}
+
+/// Whether every record of an uncompressed chunk's body ends inside the chunk's records (mcap
+/// 0.26's reader subtracts their lengths from what remains unchecked). A compressed chunk, or
+/// a body too short to tell, passes: the reader reports those itself.
+fn chunk_records_fit(body: &[u8]) -> Option<()> {
+    let u32_at = |at: usize| -> Option<usize> {
+        Some(u32::from_le_bytes(body.get(at..at + 4)?.try_into().ok()?) as usize)
+    };
+    let u64_at = |at: usize| -> Option<u64> {
+        Some(u64::from_le_bytes(body.get(at..at + 8)?.try_into().ok()?))
+    };
+    let Some(compression_len) = u32_at(28) else {
+        return Some(());
+    };
+    let records_at = 32usize.checked_add(compression_len)?;
+    if compression_len != 0 {
+        return Some(());
+    }
+    let Some(records_len) = u64_at(records_at) else {
+        return Some(());
+    };
+    let mut left = records_len;
+    let mut at = records_at + 8;
+    while left > 0 {
+        // opcode (1) + length (8) + the record.
+        let len = u64_at(at + 1)?;
+        let whole = len.checked_add(9)?;
+        left = left.checked_sub(whole)?;
+        at = at.checked_add(usize::try_from(whole).ok()?)?;
+    }
+    Some(())
 }
 
 /// Whether an attachment record's body holds its header, its data and the CRC.
