@@ -299,7 +299,13 @@ pub fn plan(theta: &[f64; 6], span: f64) -> Plan {
 
 /// φ1…φ4 at z (module doc; φ4(z) = (φ3(z) − 1/6)/z): by their Taylor series Σ z^j/(j+k)! for
 /// |z| < ½, where the closed forms cancel, else in closed form.
+#[cfg(test)]
 fn phi(z: f64) -> [f64; 4] {
+    phi_with(z, z.exp())
+}
+
+/// [`phi`] given `e` = e^z.
+fn phi_with(z: f64, e: f64) -> [f64; 4] {
     if z.abs() < 0.5 {
         let mut p = [0.0; 4];
         for (k, out) in p.iter_mut().enumerate() {
@@ -313,7 +319,6 @@ fn phi(z: f64) -> [f64; 4] {
         }
         return p;
     }
-    let e = z.exp();
     let p1 = (e - 1.0) / z;
     let p2 = (p1 - 1.0) / z;
     let p3 = (p2 - 0.5) / z;
@@ -356,13 +361,15 @@ pub fn etdrk4_step<const N: usize, U: StepCommand>(
     }
     let coef = |l: f64| {
         let z = h * l;
-        let [half, ..] = phi(0.5 * z);
+        // φ's closed forms need e^z anyway: one exponential per argument.
+        let (e2, e) = ((0.5 * z).exp(), z.exp());
+        let [half, ..] = phi_with(0.5 * z, e2);
         Coef {
             l,
-            e: z.exp(),
-            e2: (0.5 * z).exp(),
+            e,
+            e2,
             p2h: 0.5 * h * half,
-            p: phi(z).map(|p| h * p),
+            p: phi_with(z, e).map(|p| h * p),
         }
     };
     let k = [coef(lin[0]), coef(lin[1])];
