@@ -36,7 +36,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 use wheelid_models::{Parameterization, VwPdMap, WheelPdMap};
 
-use wheelid_core::Recording;
+use wheelid_core::{Columns, Recording};
 
 use crate::identify::Identification;
 
@@ -55,18 +55,20 @@ pub enum ReadError {
 /// Reads one recording for `identify` and `diagnose`: a CSV (RECORDING_FORMAT.md) or a ROS 2
 /// bag (`.mcap`, or a rosbag2 folder: `/cmd_vel` and `/odom`, timed by log time, as
 /// `wheelid simulate --out x.mcap` writes and [`wheelid_robots::replay::read_mcap`] reads);
-/// the format from the extension, else from the content (MCAP magic bytes, else text).
+/// the format from the extension, else from the content (MCAP magic bytes, else text). A CSV
+/// keeps the columns of `columns` ([`Columns::Required`] for `identify` and `diagnose`, which
+/// use no pose or wheel column); a bag has the required ones only.
 ///
 /// # Errors
 /// [`ReadError`], naming the file.
-pub fn read_recording(path: &Path) -> Result<Recording, ReadError> {
+pub fn read_recording(path: &Path, columns: Columns) -> Result<Recording, ReadError> {
     use wheelid_robots::replay::{ReplayFormat, ReplaySettings};
     let mut settings = ReplaySettings::new(path);
     // Told once (a sniff reads the file's head), then kept for the load.
     let format = settings.resolved_format()?;
     settings.format = Some(format);
     match format {
-        ReplayFormat::Csv => Ok(Recording::read_csv(path)?),
+        ReplayFormat::Csv => Ok(Recording::read_csv_columns(path, columns)?),
         ReplayFormat::Mcap => Ok(settings.load()?),
     }
 }

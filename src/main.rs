@@ -8,6 +8,7 @@ use wheelid::config::{
     DiagnoseConfig, ExcitationConfig, SimulateConfig, TrackConfig, read_toml, read_toml_or_default,
     robot_profile,
 };
+use wheelid::core::Columns;
 use wheelid::files::{ModelFile, read_bounds};
 use wheelid::identify::{Estimator, IdentifySettings, identify};
 use wheelid::robots::{
@@ -616,7 +617,7 @@ fn run_identify(a: IdentifyArgs) -> Result<()> {
         let recs = a
             .files
             .iter()
-            .map(|f| wheelid::files::read_recording(f))
+            .map(|f| wheelid::files::read_recording(f, Columns::Required))
             .collect::<Result<Vec<_>, _>>()?;
         (recs, None)
     };
@@ -737,7 +738,7 @@ fn run_diagnose(a: DiagnoseArgs) -> Result<()> {
     } else {
         files
             .iter()
-            .map(|f| wheelid::files::read_recording(f))
+            .map(|f| wheelid::files::read_recording(f, Columns::Required))
             .collect::<Result<Vec<_>, _>>()?
     };
     let bar = Bar::new(!a.json);

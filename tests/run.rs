@@ -102,7 +102,9 @@ fn a_ros2_bag_made_by_the_simulator_replays_and_identifies() {
         .expect("runs");
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let committed = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/data/khepera_sim.mcap");
-    let read = |p: &Path| wheelid::files::read_recording(p).expect("reads the bag");
+    let read = |p: &Path| {
+        wheelid::files::read_recording(p, wheelid::core::Columns::All).expect("reads the bag")
+    };
     let (a, b) = (read(&committed), read(&remade));
     assert_eq!((&a.t, &a.v_ref, &a.w_ref), (&b.t, &b.v_ref, &b.w_ref));
     assert_eq!((&a.v, &a.w), (&b.v, &b.w));

@@ -134,6 +134,21 @@ impl Conditioned {
         signal::sosfiltfilt(&self.sos, x).map_err(|e| self.name_error(e))
     }
 
+    /// [`Conditioned::smooth`] of each of `xs`, in order, the signals shared out over the
+    /// available cores when they are long (they are independent; each result is the one
+    /// [`Conditioned::smooth`] gives, bit for bit).
+    ///
+    /// # Errors
+    /// As [`Conditioned::smooth`], for the first signal that fails.
+    pub fn smooth_all(&self, xs: &[&[f64]]) -> Result<Vec<Vec<f64>>> {
+        const PARALLEL_MIN_SAMPLES: usize = 100_000;
+        if xs.iter().map(|x| x.len()).sum::<usize>() < PARALLEL_MIN_SAMPLES {
+            return xs.iter().map(|x| self.smooth(x)).collect();
+        }
+        use rayon::prelude::*;
+        xs.par_iter().map(|x| self.smooth(x)).collect()
+    }
+
     /// The derivative d/dt of `x` (length n) with the configured stencil.
     ///
     /// # Errors
@@ -242,17 +257,25 @@ pub fn suggest_cutoff(recs: &[&Recording]) -> Result<(f64, CutoffChoice)> {
         ));
     };
     let fs = 1.0 / first.sampling().dt_median;
-    let mut f95: Option<f64> = None;
-    let mut t_min = f64::INFINITY;
-    for r in recs {
-        let fs_r = 1.0 / r.sampling().dt_median;
-        t_min = t_min.min(r.duration());
-        for col in [&r.v_ref, &r.w_ref] {
-            if let Some(f) = signal::power_quantile_hz(col, fs_r, 0.95) {
-                f95 = Some(f95.map_or(f, |g: f64| g.max(f)));
-            }
-        }
-    }
+    let t_min = recs
+        .iter()
+        .map(|r| r.duration())
+        .fold(f64::INFINITY, f64::min);
+    // The commands' spectra are independent: one per core.
+    let columns: Vec<(&[f64], f64)> = recs
+        .iter()
+        .flat_map(|r| {
+            let fs_r = 1.0 / r.sampling().dt_median;
+            [(&r.v_ref[..], fs_r), (&r.w_ref[..], fs_r)]
+        })
+        .collect();
+    let f95 = {
+        use rayon::prelude::*;
+        columns
+            .par_iter()
+            .filter_map(|(col, fs_r)| signal::power_quantile_hz(col, *fs_r, 0.95))
+            .reduce_with(f64::max)
+    };
     let raw = f95.map_or(fs / 10.0, |f| 2.0 * f);
     let lo = (5.0 / t_min).min(fs / 5.0);
     let fc = raw.clamp(lo, fs / 5.0);

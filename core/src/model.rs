@@ -78,8 +78,12 @@ pub struct ChannelRegression {
 impl ChannelRegression {
     /// Stacks per-recording regressions channel by channel (rows of recording 1, then 2, …):
     /// one multi-experiment problem. `per_file[r][c]` is recording r's channel c; every
-    /// recording must list the same channels with the same columns.
-    pub fn stack(per_file: &[Vec<ChannelRegression>]) -> Vec<ChannelRegression> {
+    /// recording must list the same channels with the same columns. One recording's
+    /// regressions are returned as they are (moved, not copied).
+    pub fn stack(mut per_file: Vec<Vec<ChannelRegression>>) -> Vec<ChannelRegression> {
+        if per_file.len() == 1 {
+            return per_file.pop().unwrap_or_default();
+        }
         let Some(first) = per_file.first() else {
             return Vec::new();
         };
@@ -92,7 +96,7 @@ impl ChannelRegression {
                 let mut x = DMatrix::zeros(n, k);
                 let mut y = DVector::zeros(n);
                 let mut row = 0;
-                for f in per_file {
+                for f in &per_file {
                     let r = &f[ch];
                     x.view_mut((row, 0), (r.y.len(), k)).copy_from(&r.x);
                     y.rows_mut(row, r.y.len()).copy_from(&r.y);

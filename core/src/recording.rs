@@ -32,6 +32,7 @@ use std::path::{Path, PathBuf};
 use crate::error::{Error, Location, Result};
 
 mod csv_read;
+pub use csv_read::Columns;
 
 /// How the recorded commands were applied between samples.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
@@ -408,21 +409,24 @@ impl Recording {
         Ok(())
     }
 
-    /// Reads a recording CSV file, streaming (the file is never held whole in memory).
+    /// Reads a recording CSV file, every column of the format it has. Streaming (the file is
+    /// never held whole in memory); a file of more than a few MB is parsed in parts, one per
+    /// core, split at line ends.
     ///
     /// # Errors
-    /// [`Error::Io`] if the file cannot be read; otherwise as [`Recording::from_csv_str`].
+    /// [`Error::Io`] if the file cannot be read; otherwise as [`Recording::from_csv_str`] (the
+    /// same error, file, line and column whether or not the file was parsed in parts).
     pub fn read_csv(path: impl AsRef<Path>) -> Result<Self> {
-        let path = path.as_ref();
-        let file = std::fs::File::open(path).map_err(|source| Error::Io {
-            path: path.to_owned(),
-            source,
-        })?;
-        csv_read::parse(
-            std::io::BufReader::with_capacity(1 << 20, file),
-            path.to_owned(),
-            &csv_read::Lines::File(path),
-        )
+        Self::read_csv_columns(path, Columns::All)
+    }
+
+    /// [`Recording::read_csv`] keeping only `columns` ([`Columns::Required`]: the five an
+    /// identification needs, the others skipped unparsed — less time and memory on long files).
+    ///
+    /// # Errors
+    /// As [`Recording::read_csv`].
+    pub fn read_csv_columns(path: impl AsRef<Path>, columns: Columns) -> Result<Self> {
+        csv_read::read_file(path.as_ref(), columns)
     }
 
     /// Parses recording CSV text; `source` names it in errors. A UTF-8 byte-order mark, CRLF
@@ -605,6 +609,80 @@ mod tests {
             .expect_err("bad cell")
             .to_string();
         assert!(e.contains("b.csv:6") && e.contains("w_ref"), "{e}");
+    }
+
+    /// A recording file of more than `PARALLEL_MIN_BYTES`, parsed in parts: with a BOM, CRLF,
+    /// comment and blank lines and pose columns; `edit` changes row `k`'s text.
+    fn big_file(dir: &Path, edit: impl Fn(usize, String) -> String) -> (PathBuf, String) {
+        let mut text = String::from("\u{feff}# robot: big\r\nt,v_ref,w_ref,v,w,x,y,phi\r\n");
+        for k in 0..120_000 {
+            if k % 9_999 == 0 {
+                text.push_str("# a note\r\n\r\n");
+            }
+            let t = k as f64 * 0.02;
+            let row = format!(
+                "{t:.2},{:.6},{:.6},{:.9},{:.9},{:.4},{:.4},{:.4}\r\n",
+                (t * 0.7).sin(),
+                (t * 0.3).cos(),
+                (t * 0.7).sin() * 0.9,
+                (t * 0.3).cos() * 0.8,
+                t,
+                -t,
+                0.5 * t
+            );
+            text.push_str(&edit(k, row));
+        }
+        let path = dir.join("big.csv");
+        std::fs::write(&path, &text).expect("writes");
+        (path, text)
+    }
+
+    #[test]
+    fn a_big_file_read_in_parts_equals_the_sequential_parse_even_in_its_errors() {
+        let dir = tempfile::tempdir().expect("tmp");
+        let (path, text) = big_file(dir.path(), |_, row| row);
+        assert!(text.len() as u64 > csv_read::PARALLEL_MIN_BYTES);
+        let whole = Recording::from_csv_str(&text, &path).expect("parses");
+        let split = || csv_read::SPLIT_READS.load(std::sync::atomic::Ordering::Relaxed);
+        let before = split();
+        let parts = Recording::read_csv(&path).expect("reads");
+        assert!(split() > before, "the file was not read in parts");
+        assert_eq!(parts.len(), 120_000);
+        assert_eq!(parts.meta, whole.meta);
+        for (a, b) in [
+            (&parts.t, &whole.t),
+            (&parts.v_ref, &whole.v_ref),
+            (&parts.w_ref, &whole.w_ref),
+            (&parts.v, &whole.v),
+            (&parts.w, &whole.w),
+        ] {
+            assert!(a == b);
+        }
+        assert_eq!(parts.phi, whole.phi);
+        assert!(parts.x.is_some() && parts.wl.is_none());
+        let required = Recording::read_csv_columns(&path, Columns::Required).expect("reads");
+        assert!(required.x.is_none() && required.phi.is_none());
+        assert_eq!(required.w, whole.w);
+        // Errors anywhere (past the split, near it, a quote left open across it) are the sequential
+        // parse's, file, line and column.
+        type Edit = fn(String) -> String;
+        let cases: [(usize, Edit); 4] = [
+            (100_000, |r| r.replacen(",", ",x", 2)),
+            (60_000, |r| r.replacen("1200.00", "1199.98", 1)),
+            (59_990, |r| format!("\"{r}")),
+            (119_999, |r| r.replacen(",", ",,", 1)),
+        ];
+        for (at, edit) in cases {
+            let (path, text) = big_file(dir.path(), |k, row| if k == at { edit(row) } else { row });
+            let seq = Recording::from_csv_str(&text, &path).map(|r| r.len());
+            let par = Recording::read_csv(&path).map(|r| r.len());
+            assert_eq!(
+                par.as_ref().map_err(ToString::to_string),
+                seq.as_ref().map_err(ToString::to_string),
+                "row {at}"
+            );
+            assert!(seq.is_err(), "row {at}: the edit must break the file");
+        }
     }
 
     #[test]

@@ -68,30 +68,23 @@ pub const CHANNELS: [ChannelInfo; 2] = [
 pub fn regression(data: &Conditioned) -> Result<Vec<ChannelRegression>> {
     let keep = data.valid_range();
     let n = keep.len();
-    let vf = data.smooth(&data.v)?;
-    let wf = data.smooth(&data.w)?;
-    let dv = data.differentiate(&vf)?;
-    let dw = data.differentiate(&wf)?;
     let w2: Vec<f64> = data.w.iter().map(|w| -w * w).collect();
     let vw: Vec<f64> = data.v.iter().zip(&data.w).map(|(v, w)| v * w).collect();
-    let w2f = data.smooth(&w2)?;
-    let vwf = data.smooth(&vw)?;
-    let yv = data.smooth(&data.v_ref)?;
-    let yw = data.smooth(&data.w_ref)?;
-    let mat = |cols: [&Vec<f64>; 3]| DMatrix::from_fn(n, 3, |i, j| cols[j][keep.start + i]);
-    let kept = |y: &[f64]| DVector::from_column_slice(&y[keep.clone()]);
-    Ok(vec![
-        ChannelRegression {
-            channel: "v",
-            params: CHANNELS[0].params.to_vec(),
-            x: mat([&dv, &w2f, &vf]),
-            y: kept(&yv),
-        },
-        ChannelRegression {
-            channel: "w",
-            params: CHANNELS[1].params.to_vec(),
-            x: mat([&dw, &vwf, &wf]),
-            y: kept(&yw),
-        },
-    ])
+    let [vf, wf, w2f, vwf, yv, yw]: [Vec<f64>; 6] = data
+        .smooth_all(&[&data.v, &data.w, &w2, &vw, &data.v_ref, &data.w_ref])?
+        .try_into()
+        .map_err(|_| wheelid_core::Error::InvalidSetting("six filtered signals".into()))?;
+    drop((w2, vw));
+    let dv = data.differentiate(&vf)?;
+    let dw = data.differentiate(&wf)?;
+    // Each channel's signals are dropped once its rows are built (a 1e6-row run holds one
+    // channel's filtered signals less at its peak).
+    let channel = |i: usize, cols: [Vec<f64>; 3], y: Vec<f64>| ChannelRegression {
+        channel: CHANNELS[i].name,
+        params: CHANNELS[i].params.to_vec(),
+        x: DMatrix::from_fn(n, 3, |r, j| cols[j][keep.start + r]),
+        y: DVector::from_column_slice(&y[keep.clone()]),
+    };
+    let v = channel(0, [dv, w2f, vf], yv);
+    Ok(vec![v, channel(1, [dw, vwf, wf], yw)])
 }

@@ -151,7 +151,7 @@ impl Solver for BoxLs {
             }
         }
         let e = p.y - p.x * &theta;
-        let cov = covariance(&d, &e, p.correlation_lags);
+        let cov = covariance(&d, p.x, &e, p.correlation_lags);
         Ok(LinearFit {
             std_err: cov.diagonal().map(|v| v.max(0.0).sqrt()),
             covariance: cov,

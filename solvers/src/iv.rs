@@ -110,10 +110,10 @@ impl InstrumentalVariables {
             .map(|c| model.regression(c))
             .collect::<Result<Vec<_>, _>>()
             .map_err(invalid)?;
-        let regressions = ChannelRegression::stack(&per_file);
+        let regressions = ChannelRegression::stack(per_file);
         let initial: Vec<Vec<f64>> = data
             .iter()
-            .map(|c| Ok(vec![c.smooth(&c.v)?[0], c.smooth(&c.w)?[0]]))
+            .map(|c| Ok(c.smooth_all(&[&c.v, &c.w])?.iter().map(|x| x[0]).collect()))
             .collect::<Result<_, wheelid_core::Error>>()
             .map_err(invalid)?;
         if regressions
@@ -151,7 +151,7 @@ impl InstrumentalVariables {
                     .map_err(invalid)?;
                 inst_files.push(model.regression(&cs).map_err(invalid)?);
             }
-            let instruments = ChannelRegression::stack(&inst_files);
+            let instruments = ChannelRegression::stack(inst_files);
             let mut next = theta.clone();
             for (reg, inst) in regressions.iter().zip(&instruments) {
                 let names: Vec<&str> = reg.params.iter().map(|&i| model.params()[i].name).collect();

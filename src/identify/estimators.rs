@@ -41,7 +41,7 @@ pub(super) fn least_squares(
         .iter()
         .map(|c| model.regression(c))
         .collect::<Result<_, _>>()?;
-    let regressions = ChannelRegression::stack(&per_file);
+    let regressions = ChannelRegression::stack(per_file);
     let p = model.params().len();
     let names: Vec<&str> = model.params().iter().map(|q| q.name).collect();
     let mut theta = vec![0.0; p];

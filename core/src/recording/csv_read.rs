@@ -48,6 +48,8 @@ struct Preamble {
     header_offset: u64,
     /// Lines before the header line.
     meta_lines: u64,
+    /// Bytes up to the end of the header line (where the rows start).
+    data_offset: u64,
 }
 
 /// Reads the metadata lines and the header line, up to and including the header.
@@ -77,6 +79,7 @@ fn preamble(input: &mut impl BufRead, source: &Path) -> Result<Preamble> {
                 header: String::new(),
                 header_offset: consumed,
                 meta_lines: lines,
+                data_offset: consumed,
             });
         }
         consumed += n as u64;
@@ -97,6 +100,7 @@ fn preamble(input: &mut impl BufRead, source: &Path) -> Result<Preamble> {
                 header: text.to_owned(),
                 header_offset: consumed - n as u64,
                 meta_lines: lines,
+                data_offset: consumed,
             });
         }
         lines += 1;
@@ -115,6 +119,7 @@ pub(super) fn parse(
         header,
         header_offset,
         meta_lines,
+        ..
     } = preamble(&mut input, &source)?;
     let header_line = meta_lines + 1;
     let stream = std::io::Cursor::new(header.into_bytes()).chain(input);
@@ -232,4 +237,209 @@ pub(super) fn parse(
 fn number(raw: &[u8]) -> Option<f64> {
     let text = std::str::from_utf8(raw).ok()?;
     text.parse().ok().or_else(|| text.trim().parse().ok())
+}
+
+/// Which columns a read keeps.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Columns {
+    /// Every column of the format the file has (required and optional).
+    #[default]
+    All,
+    /// The five required columns only (`t`, `v_ref`, `w_ref`, `v`, `w`): what identification
+    /// needs; the pose and wheel columns are skipped unparsed.
+    Required,
+}
+
+/// Files read in parts without falling back (tests check that the split path ran).
+#[cfg(test)]
+pub(super) static SPLIT_READS: std::sync::atomic::AtomicUsize =
+    std::sync::atomic::AtomicUsize::new(0);
+
+/// Data below this many bytes is parsed on the calling thread.
+pub(super) const PARALLEL_MIN_BYTES: u64 = 4 << 20;
+
+/// Reads a recording file with its data rows split at line ends into one part per core of
+/// rayon's pool, each part parsed on its own thread from its own file handle (streaming, as
+/// [`parse`]). Any error or irregularity in any part — a bad cell, a ragged row, time not
+/// increasing, a quoted field across a split — makes it read the file again with [`parse`],
+/// whose error (file, line, column) is the one reported: the fast path never decides an error.
+pub(super) fn read_file(path: &Path, columns: Columns) -> Result<Recording> {
+    let io = |source| Error::Io {
+        path: path.to_owned(),
+        source,
+    };
+    let sequential = || -> Result<Recording> {
+        let file = std::fs::File::open(path).map_err(io)?;
+        let mut rec = parse(
+            std::io::BufReader::with_capacity(1 << 20, file),
+            path.to_owned(),
+            &Lines::File(path),
+        )?;
+        if columns == Columns::Required {
+            (rec.x, rec.y, rec.phi, rec.wl, rec.wr) = (None, None, None, None, None);
+        }
+        Ok(rec)
+    };
+    // At least two parts, so that the split path is the same on every machine.
+    let threads = rayon::current_num_threads().clamp(2, 8);
+    let len = std::fs::metadata(path).map_err(io)?.len();
+    if len < PARALLEL_MIN_BYTES {
+        return sequential();
+    }
+    let mut head = std::io::BufReader::new(std::fs::File::open(path).map_err(io)?);
+    let Ok(pre) = preamble(&mut head, path) else {
+        return sequential();
+    };
+    let start = pre.data_offset;
+    let headers: Vec<&str> = pre.header.trim_end().split(',').map(str::trim).collect();
+    let find = |name: &str| headers.iter().position(|h| *h == name);
+    let Some(req): Option<Vec<usize>> = REQUIRED.iter().map(|n| find(n)).collect() else {
+        return sequential();
+    };
+    let opt: Vec<usize> = match columns {
+        Columns::All => OPTIONAL.iter().filter_map(|n| find(n)).collect(),
+        Columns::Required => Vec::new(),
+    };
+    let opt_present: Vec<bool> = OPTIONAL.iter().map(|n| find(n).is_some()).collect();
+    let wanted: Vec<usize> = req.iter().chain(&opt).copied().collect();
+    let Some(bounds) = split_points(path, start, len, threads) else {
+        return sequential();
+    };
+    let parts: Vec<Option<Vec<Vec<f64>>>> = {
+        use rayon::prelude::*;
+        bounds
+            .par_windows(2)
+            .map(|w| parse_part(path, w[0], w[1], &wanted, headers.len()))
+            .collect()
+    };
+    match join_parts(parts) {
+        Some(cols) => {
+            #[cfg(test)]
+            SPLIT_READS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            Ok(assemble(path, pre.meta, cols, &opt_present, columns))
+        }
+        None => sequential(),
+    }
+}
+
+/// `threads + 1` byte offsets from `start` to `len`, each inner one moved to just after the
+/// next line end; `None` if a part would be empty.
+fn split_points(path: &Path, start: u64, len: u64, threads: usize) -> Option<Vec<u64>> {
+    use std::io::{Seek, SeekFrom};
+    let mut points = vec![start];
+    let mut file = std::io::BufReader::new(std::fs::File::open(path).ok()?);
+    for i in 1..threads as u64 {
+        let guess = start + (len - start) * i / threads as u64;
+        file.seek(SeekFrom::Start(guess)).ok()?;
+        let mut skipped = Vec::new();
+        let n = file.read_until(b'\n', &mut skipped).ok()? as u64;
+        let point = guess + n;
+        if point <= *points.last()? || point >= len {
+            return None;
+        }
+        points.push(point);
+    }
+    points.push(len);
+    Some(points)
+}
+
+/// Parses the rows in bytes `[a, b)` of `path` into the `wanted` columns (finite numbers,
+/// `width` cells a row, time strictly increasing); `None` on anything else.
+fn parse_part(
+    path: &Path,
+    a: u64,
+    b: u64,
+    wanted: &[usize],
+    width: usize,
+) -> Option<Vec<Vec<f64>>> {
+    use std::io::{Seek, SeekFrom};
+    let mut file = std::fs::File::open(path).ok()?;
+    file.seek(SeekFrom::Start(a)).ok()?;
+    let input = std::io::BufReader::with_capacity(1 << 20, file.take(b - a));
+    let mut rdr = csv::ReaderBuilder::new()
+        .has_headers(false)
+        .flexible(true)
+        .comment(Some(b'#'))
+        .buffer_capacity(1 << 16)
+        .from_reader(input);
+    // Rows of this part, guessed from its size and ~12 bytes a cell, to grow the columns once.
+    let guess = ((b - a) / (12 * width.max(1) as u64)) as usize;
+    let mut cols: Vec<Vec<f64>> = wanted.iter().map(|_| Vec::with_capacity(guess)).collect();
+    let mut record = csv::ByteRecord::new();
+    while rdr.read_byte_record(&mut record).ok()? {
+        if record.len() != width {
+            return None;
+        }
+        for (col, &i) in cols.iter_mut().zip(wanted) {
+            let x = number(record.get(i)?)?;
+            if !x.is_finite() {
+                return None;
+            }
+            col.push(x);
+        }
+        if let [.., p, q] = cols[0].as_slice()
+            && q <= p
+        {
+            return None;
+        }
+    }
+    Some(cols)
+}
+
+/// The parts' columns end to end, the first part's grown in place; `None` if a part failed,
+/// one is empty, or time does not increase across a split.
+fn join_parts(parts: Vec<Option<Vec<Vec<f64>>>>) -> Option<Vec<Vec<f64>>> {
+    let mut parts = parts.into_iter();
+    let mut cols = parts.next()??;
+    let rest: Vec<Vec<Vec<f64>>> = parts.collect::<Option<_>>()?;
+    for (k, col) in cols.iter_mut().enumerate() {
+        col.reserve_exact(rest.iter().map(|p| p[k].len()).sum());
+    }
+    for part in rest {
+        let (&last, &first) = (cols[0].last()?, part[0].first()?);
+        if first <= last {
+            return None;
+        }
+        for (col, more) in cols.iter_mut().zip(part) {
+            col.extend_from_slice(&more);
+        }
+    }
+    cols[0].first()?;
+    Some(cols)
+}
+
+/// The recording from the joined columns: the five required first, then the optional ones
+/// present in the file (when kept).
+fn assemble(
+    path: &Path,
+    meta: Vec<(String, String)>,
+    cols: Vec<Vec<f64>>,
+    present: &[bool],
+    columns: Columns,
+) -> Recording {
+    let mut cols = cols.into_iter();
+    let mut req = || cols.next().unwrap_or_default();
+    let (t, v_ref, w_ref, v, w) = (req(), req(), req(), req(), req());
+    let mut opt = present.iter().map(|&p| {
+        if p && columns == Columns::All {
+            cols.next()
+        } else {
+            None
+        }
+    });
+    let mut next = || opt.next().flatten();
+    Recording {
+        source: path.to_owned(),
+        meta,
+        t,
+        v_ref,
+        w_ref,
+        v,
+        w,
+        x: next(),
+        y: next(),
+        phi: next(),
+        wl: next(),
+        wr: next(),
+    }
 }
