@@ -238,7 +238,8 @@ pub struct Identification {
     pub steady_theta6: Option<SteadyStateEstimate>,
     /// Measured vs simulated series, for plots.
     pub series: Vec<FileSeries>,
-    /// Stacked regressions per channel (for the regression plots).
+    /// Stacked regressions per channel, for the regression plots: every k-th row of a long
+    /// run (at most 20,000 rows a channel).
     pub regressions: Vec<ChannelRegression>,
     /// The stamping convention the output-error fit used, stated or estimated (`None` when
     /// output error did not run).

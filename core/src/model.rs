@@ -76,6 +76,23 @@ pub struct ChannelRegression {
 }
 
 impl ChannelRegression {
+    /// Every k-th row from the first, k = ⌈n / `max_rows`⌉: at most `max_rows` rows (all of
+    /// them when n ≤ `max_rows`, moved, not copied) — what a plot of a long run needs.
+    pub fn thinned(self, max_rows: usize) -> Self {
+        let n = self.y.len();
+        if n <= max_rows.max(1) {
+            return self;
+        }
+        let step = n.div_ceil(max_rows.max(1));
+        let rows: Vec<usize> = (0..n).step_by(step).collect();
+        ChannelRegression {
+            channel: self.channel,
+            params: self.params,
+            x: self.x.select_rows(&rows),
+            y: self.y.select_rows(&rows),
+        }
+    }
+
     /// Stacks per-recording regressions channel by channel (rows of recording 1, then 2, …):
     /// one multi-experiment problem. `per_file[r][c]` is recording r's channel c; every
     /// recording must list the same channels with the same columns. One recording's

@@ -20,9 +20,14 @@ pub(super) struct LeastSquares {
     pub report: EstimateReport,
     /// Per channel: R² of the filtered regression, condition number, samples.
     pub quality: Vec<(f64, f64, usize)>,
-    /// The stacked regressions per channel (for the regression plots).
+    /// The stacked regressions per channel, thinned to at most [`PLOT_ROWS`] rows (for the
+    /// regression plots).
     pub regressions: Vec<ChannelRegression>,
 }
+
+/// Rows of each channel's regression kept for the plots (every k-th row of a longer run: a
+/// 1e6-row run keeps 20,000 instead of the whole 1e6 × 3 matrix).
+pub(super) const PLOT_ROWS: usize = 20_000;
 
 /// Builds each recording's regression (eq. 4.2), stacks them per channel and solves each
 /// channel with `solver` (eq. 4.3–4.7, within `settings.bounds` when given).
@@ -92,7 +97,10 @@ pub(super) fn least_squares(
             seconds: clock.elapsed().as_secs_f64(),
         },
         quality,
-        regressions,
+        regressions: regressions
+            .into_iter()
+            .map(|r| r.thinned(PLOT_ROWS))
+            .collect(),
     })
 }
 

@@ -34,8 +34,8 @@ pub(super) fn validate(
     let nch = model.channels().len();
     let mut series = Vec::new();
     let mut files = Vec::new();
-    let mut all_meas = vec![Vec::new(); nch];
-    let mut all_sim = vec![Vec::new(); nch];
+    // Samples left out at each file's start (see `skip` below).
+    let mut skips = Vec::new();
     let offset_params = CommandOffset::params_of(model);
     let with_offset = CommandOffset::new(model, &offset_params)?;
     for ((c, x0), rec) in conditioned.iter().zip(initial).zip(recordings) {
@@ -61,10 +61,7 @@ pub(super) fn validate(
         let fits: Vec<f64> = (0..nch)
             .map(|ch| metrics::fit_percent(&measured[ch][skip..], &simulated[ch][skip..]))
             .collect();
-        for ch in 0..nch {
-            all_meas[ch].extend_from_slice(&measured[ch][skip..]);
-            all_sim[ch].extend_from_slice(&simulated[ch][skip..]);
-        }
+        skips.push(skip);
         files.push(FileReport {
             source: c.source.clone(),
             samples: rec.len(),
@@ -88,7 +85,13 @@ pub(super) fn validate(
         .map(|(ch, (info, &(r2, cond, n)))| ChannelReport {
             name: info.name.into(),
             r2,
-            fit_percent: metrics::fit_percent(&all_meas[ch], &all_sim[ch]),
+            fit_percent: metrics::fit_percent_parts(
+                &series
+                    .iter()
+                    .zip(&skips)
+                    .map(|(s, &k)| (&s.measured[ch][k..], &s.simulated[ch][k..]))
+                    .collect::<Vec<_>>(),
+            ),
             condition_number: cond,
             samples: n,
         })
