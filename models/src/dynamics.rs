@@ -433,6 +433,7 @@ pub fn check_theta(theta: &[f64]) -> Result<[f64; 6]> {
 }
 
 /// What both simulations check and read first.
+#[derive(Clone, Copy)]
 struct Setup {
     th: [f64; 6],
     v0: f64,
@@ -516,12 +517,25 @@ pub fn simulate(theta: &[f64], rec: &Recording, initial: &[f64]) -> Result<[Vec<
 
 /// Number of sensitivity columns: θ1…θ6, then v0, ω0.
 const NS: usize = 8;
-/// Augmented state: v, ω, then S row-major (∂v/∂p, ∂ω/∂p).
-const NZ: usize = 2 + 2 * NS;
+/// Columns per thread when a long recording's sensitivities are split in two.
+const HALF: usize = NS / 2;
+/// Samples from which the sensitivity columns are integrated on two threads (each carries the
+/// state and half the columns; the results are the same bit for bit, see
+/// [`integrate_columns`]).
+const SPLIT_SAMPLES: usize = 20_000;
 
-/// Derivative of the augmented state z = (v, ω, S) for commands u.
+/// Derivative of the augmented state z = (v, ω, S) for commands u, where S holds the `M`
+/// sensitivity columns `off … off + M − 1` of (θ1…θ6, v0, ω0), row-major (∂v/∂p…, ∂ω/∂p…).
+/// Each column's derivative depends only on (v, ω) and itself, so any split of the columns
+/// gives the same numbers.
 #[inline]
-fn augmented_rhs(theta: &[f64; 6], inv: [f64; 2], z: &[f64; NZ], u: (f64, f64)) -> [f64; NZ] {
+fn augmented_rhs<const M: usize, const Z: usize>(
+    theta: &[f64; 6],
+    inv: [f64; 2],
+    off: usize,
+    z: &[f64; Z],
+    u: (f64, f64),
+) -> [f64; Z] {
     let [_, _, t3, t4, t5, t6] = *theta;
     let [i1, i2] = inv;
     let (v, w) = (z[0], z[1]);
@@ -533,34 +547,36 @@ fn augmented_rhs(theta: &[f64; 6], inv: [f64; 2], z: &[f64; NZ], u: (f64, f64)) 
         [-t4 * i1, 2.0 * t3 * w * i1],
         [-t5 * w * i2, -(t5 * v + t6) * i2],
     ];
-    let mut out = [0.0; NZ];
+    let mut out = [0.0; Z];
     out[0] = dv;
     out[1] = dw;
-    for j in 0..NS {
-        let (sv, sw) = (z[2 + j], z[2 + NS + j]);
+    for j in 0..M {
+        let (sv, sw) = (z[2 + j], z[2 + M + j]);
         out[2 + j] = a[0][0] * sv + a[0][1] * sw;
-        out[2 + NS + j] = a[1][0] * sv + a[1][1] * sw;
+        out[2 + M + j] = a[1][0] * sv + a[1][1] * sw;
+        // The explicit ∂f/∂θ of eq. 2.19 (module doc), for the columns this group holds.
+        match off + j {
+            0 => out[2 + j] += -dv * i1,
+            1 => out[2 + M + j] += -dw * i2,
+            2 => out[2 + j] += w * w * i1,
+            3 => out[2 + j] += -v * i1,
+            4 => out[2 + M + j] += -v * w * i2,
+            5 => out[2 + M + j] += -w * i2,
+            _ => {}
+        }
     }
-    out[2] += -dv * i1;
-    out[2 + 2] += w * w * i1;
-    out[2 + 3] += -v * i1;
-    out[2 + NS + 1] += -dw * i2;
-    out[2 + NS + 4] += -v * w * i2;
-    out[2 + NS + 5] += -w * i2;
     out
 }
 
-/// Free-run simulation as [`simulate`], with the output sensitivities to θ (n × 6 per channel)
-/// and to the initial state (n × 2 per channel), from the forward sensitivity equations in the
-/// module doc, integrated by the same RK4 sub-steps.
-///
-/// # Errors
-/// As [`simulate`].
-pub fn simulate_with_sensitivities(
-    theta: &[f64],
+/// Integrates (v, ω) with the sensitivity columns `off … off + M − 1` (state length Z =
+/// 2 + 2M) by the sub-steps of [`simulate`], handing each sample's (v, ω, S) — window
+/// averages when the recording has them — to `sink(k, z)`.
+fn integrate_columns<const M: usize, const Z: usize>(
+    setup: &Setup,
     rec: &Recording,
-    initial: &[f64],
-) -> Result<([Vec<f64>; 2], Sensitivities)> {
+    off: usize,
+    mut sink: impl FnMut(usize, &[f64; Z]),
+) {
     let Setup {
         th,
         v0,
@@ -568,31 +584,22 @@ pub fn simulate_with_sensitivities(
         n,
         hold,
         avg,
-    } = setup(theta, rec, initial)?;
-    let mut z = [0.0; NZ];
+    } = *setup;
+    let mut z = [0.0; Z];
     z[0] = v0;
     z[1] = w0;
-    z[2 + 6] = 1.0; // ∂v/∂v0
-    z[2 + NS + 7] = 1.0; // ∂ω/∂ω0
-    let mut y = [Vec::with_capacity(n), Vec::with_capacity(n)];
-    let mut sens = [DMatrix::zeros(n, NS), DMatrix::zeros(n, NS)];
-    let store = |k: usize,
-                 x: &[f64; NZ],
-                 scale: f64,
-                 y: &mut [Vec<f64>; 2],
-                 sens: &mut [DMatrix<f64>; 2]| {
-        for ch in 0..2 {
-            y[ch].push(x[ch] * scale);
-            for j in 0..NS {
-                sens[ch][(k, j)] = x[2 + ch * NS + j] * scale;
-            }
-        }
-    };
-    store(0, &z, 1.0, &mut y, &mut sens);
+    // ∂v/∂v0 and ∂ω/∂ω0 start at 1, where this group holds them.
+    if (off..off + M).contains(&6) {
+        z[2 + 6 - off] = 1.0;
+    }
+    if (off..off + M).contains(&7) {
+        z[2 + M + 7 - off] = 1.0;
+    }
+    sink(0, &z);
     let inv = [1.0 / th[0], 1.0 / th[1]];
-    let f = |z: &[f64; NZ], u: (f64, f64)| augmented_rhs(&th, inv, z, u);
+    let f = |z: &[f64; Z], u: (f64, f64)| augmented_rhs::<M, Z>(&th, inv, off, z, u);
     for k in 1..n {
-        let mut q = [0.0; NZ];
+        let mut q = [0.0; Z];
         let span = for_each_substep(rec, k, hold, &th, |u0, u1, h, exponential| {
             if exponential {
                 let lin = [-th[3] * inv[0], -(th[4] * z[0] + th[5]) * inv[1]];
@@ -602,22 +609,117 @@ pub fn simulate_with_sensitivities(
             }
         });
         if avg {
-            store(k, &q, 1.0 / span, &mut y, &mut sens);
+            let scale = 1.0 / span;
+            sink(k, &q.map(|x| x * scale));
         } else {
-            store(k, &z, 1.0, &mut y, &mut sens);
+            sink(k, &z);
         }
     }
-    let [sv, sw] = sens;
-    let split = |s: DMatrix<f64>| (s.columns(0, 6).into_owned(), s.columns(6, 2).into_owned());
-    let (tv, iv) = split(sv);
-    let (tw, iw) = split(sw);
-    Ok((
+}
+
+/// Free-run simulation as [`simulate`], with the output sensitivities to θ (n × 6 per channel)
+/// and to the initial state (n × 2 per channel), from the forward sensitivity equations in the
+/// module doc, integrated by the same RK4 sub-steps. From [`SPLIT_SAMPLES`] samples on, the
+/// columns are integrated in two groups on two threads (each with its own copy of the state;
+/// the same numbers).
+///
+/// # Errors
+/// As [`simulate`].
+pub fn simulate_with_sensitivities(
+    theta: &[f64],
+    rec: &Recording,
+    initial: &[f64],
+) -> Result<([Vec<f64>; 2], Sensitivities)> {
+    let setup = setup(theta, rec, initial)?;
+    Ok(if setup.n < SPLIT_SAMPLES {
+        sensitivities_on_one_thread(&setup, rec)
+    } else {
+        sensitivities_on_two_threads(&setup, rec)
+    })
+}
+
+/// Output columns: (v, ω), then per channel the θ columns (n × 6) and the initial-state
+/// columns (n × 2).
+type Columns = ([Vec<f64>; 2], [DMatrix<f64>; 4]);
+
+fn empty_columns(n: usize) -> Columns {
+    (
+        [vec![0.0; n], vec![0.0; n]],
+        [
+            DMatrix::zeros(n, 6),
+            DMatrix::zeros(n, 6),
+            DMatrix::zeros(n, 2),
+            DMatrix::zeros(n, 2),
+        ],
+    )
+}
+
+fn into_sensitivities((y, [tv, tw, iv, iw]): Columns) -> ([Vec<f64>; 2], Sensitivities) {
+    (
         y,
         Sensitivities {
             theta: vec![tv, tw],
             initial: vec![iv, iw],
         },
-    ))
+    )
+}
+
+/// All eight columns with the state, on the calling thread.
+fn sensitivities_on_one_thread(setup: &Setup, rec: &Recording) -> ([Vec<f64>; 2], Sensitivities) {
+    let (mut y, [mut tv, mut tw, mut iv, mut iw]) = empty_columns(setup.n);
+    integrate_columns::<NS, { 2 + 2 * NS }>(setup, rec, 0, |k, z| {
+        y[0][k] = z[0];
+        y[1][k] = z[1];
+        for j in 0..NS {
+            let (sv, sw) = (z[2 + j], z[2 + NS + j]);
+            if j < 6 {
+                tv[(k, j)] = sv;
+                tw[(k, j)] = sw;
+            } else {
+                iv[(k, j - 6)] = sv;
+                iw[(k, j - 6)] = sw;
+            }
+        }
+    });
+    into_sensitivities((y, [tv, tw, iv, iw]))
+}
+
+/// θ1…θ4 on one thread (with the outputs), θ5, θ6, v0, ω0 on another, each integrating its own
+/// copy of the state: the numbers of [`sensitivities_on_one_thread`], bit for bit.
+fn sensitivities_on_two_threads(setup: &Setup, rec: &Recording) -> ([Vec<f64>; 2], Sensitivities) {
+    let (mut y, [mut tv, mut tw, mut iv, mut iw]) = empty_columns(setup.n);
+    {
+        let (mut tv_a, mut tv_b) = tv.columns_range_pair_mut(0..HALF, HALF..6);
+        let (mut tw_a, mut tw_b) = tw.columns_range_pair_mut(0..HALF, HALF..6);
+        let (y, iv, iw) = (&mut y, &mut iv, &mut iw);
+        rayon::join(
+            || {
+                integrate_columns::<HALF, { 2 + 2 * HALF }>(setup, rec, 0, |k, z| {
+                    y[0][k] = z[0];
+                    y[1][k] = z[1];
+                    for j in 0..HALF {
+                        tv_a[(k, j)] = z[2 + j];
+                        tw_a[(k, j)] = z[2 + HALF + j];
+                    }
+                })
+            },
+            || {
+                integrate_columns::<HALF, { 2 + 2 * HALF }>(setup, rec, HALF, |k, z| {
+                    for j in 0..HALF {
+                        let (sv, sw) = (z[2 + j], z[2 + HALF + j]);
+                        if HALF + j < 6 {
+                            tv_b[(k, j)] = sv;
+                            tw_b[(k, j)] = sw;
+                        } else {
+                            iv[(k, HALF + j - 6)] = sv;
+                            iw[(k, HALF + j - 6)] = sw;
+                        }
+                    }
+                })
+            },
+        );
+    }
+    into_sensitivities((y, [tv, tw, iv, iw]))
 }
 
 #[cfg(test)]
@@ -667,6 +769,29 @@ mod tests {
                 (vk - final_value * (1.0 - (-theta[3] * tk / theta[0]).exp())).abs() / final_value
             })
             .fold(0.0f64, f64::max)
+    }
+
+    #[test]
+    fn sensitivities_split_over_two_threads_are_the_same_bit_for_bit() {
+        // A turning drive of 2,000 samples with held and window-averaged samples, at the
+        // Khepera's θ (RK4 sub-steps) and at a stiff θ (ETDRK4): the two-thread split gives
+        // exactly the one-thread numbers.
+        let t: Vec<f64> = (0..2000).map(|k| k as f64 * 0.02).collect();
+        let vr: Vec<f64> = t.iter().map(|t| 0.1 + 0.08 * (1.3 * t).sin()).collect();
+        let wr: Vec<f64> = t.iter().map(|t| 0.9 * (0.7 * t).cos()).collect();
+        for avg in [false, true] {
+            let rec = zoh_recording(&t, &vr, &wr, avg);
+            for theta in [
+                [0.0228, 0.0568, -0.0001, 1.003, 0.0732, 0.9981],
+                [0.0004, 0.0009, -0.0001, 1.01, 0.07, 0.99],
+            ] {
+                let setup = setup(&theta, &rec, &[0.05, -0.2]).expect("valid");
+                let (y1, s1) = sensitivities_on_one_thread(&setup, &rec);
+                let (y2, s2) = sensitivities_on_two_threads(&setup, &rec);
+                assert!(y1 == y2 && s1.theta == s2.theta && s1.initial == s2.initial);
+                assert!(s1.initial[0][(0, 0)] == 1.0 && s1.theta[1].iter().any(|x| *x != 0.0));
+            }
+        }
     }
 
     #[test]

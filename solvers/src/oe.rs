@@ -51,7 +51,8 @@ use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, TerminationRe
 use nalgebra::{DMatrix, DVector};
 use nalgebra034 as na;
 use wheelid_core::{
-    BoundState, DynamicModel, LinearProblem, Recording, Simulation, SolveError, SolveStatus,
+    BoundState, DynamicModel, LinearProblem, Recording, Sensitivities, Simulation, SolveError,
+    SolveStatus,
 };
 
 use crate::ols;
@@ -291,26 +292,18 @@ impl<M: DynamicModel + ?Sized> Problem<'_, M> {
         }
         Some(out)
     }
-    /// ∂ŷ/∂(θ, x0) of recording `r`, per channel an n × (p + s) matrix.
+    /// ∂ŷ/∂θ and ∂ŷ/∂x0 of recording `r` (per channel n × p and n × s), the model's own
+    /// when it has them (used as returned, not copied), else by differences.
     fn sensitivities(
         &self,
         theta: &[f64],
         x0: &[f64],
         rec: &Recording,
         cached: Option<Simulation>,
-    ) -> Option<Vec<DMatrix<f64>>> {
+    ) -> Option<Sensitivities> {
         let (p, s, n) = (self.p(), self.nch(), rec.len());
         if let Ok(Some((_, sens))) = self.model.simulate_with_sensitivities(theta, rec, x0) {
-            return Some(
-                (0..s)
-                    .map(|c| {
-                        let mut m = DMatrix::zeros(n, p + s);
-                        m.columns_mut(0, p).copy_from(&sens.theta[c]);
-                        m.columns_mut(p, s).copy_from(&sens.initial[c]);
-                        m
-                    })
-                    .collect(),
-            );
+            return Some(sens);
         }
         // Central differences, step ~ 1e-5 relative (above the integrator's sub-step jitter),
         // the columns shared out over the available cores.
@@ -363,12 +356,20 @@ impl<M: DynamicModel + ?Sized> Problem<'_, M> {
                 .flat_map(|h| h.join().unwrap_or_else(|_| vec![None]))
                 .collect()
         });
-        let mut out = vec![DMatrix::zeros(n, p + s); s];
+        let mut out = Sensitivities {
+            theta: vec![DMatrix::zeros(n, p); s],
+            initial: vec![DMatrix::zeros(n, s); s],
+        };
         for item in done {
             let (j, h, up, dn) = item?;
             for c in 0..s {
+                let (m, col) = if j < p {
+                    (&mut out.theta[c], j)
+                } else {
+                    (&mut out.initial[c], j - p)
+                };
                 for k in 0..n {
-                    out[c][(k, j)] = (up[c][k] - dn[c][k]) / (2.0 * h);
+                    m[(k, col)] = (up[c][k] - dn[c][k]) / (2.0 * h);
                 }
             }
         }
@@ -389,15 +390,16 @@ impl<M: DynamicModel + ?Sized> Problem<'_, M> {
         };
         for (r, rec) in self.recs.iter().enumerate() {
             let sens = self.sensitivities(&theta, &self.initial_of(u, r), rec, cached[r].take())?;
-            for (c, (sc, &w)) in sens.iter().zip(&self.weight).enumerate() {
+            let channels = sens.theta.iter().zip(&sens.initial).zip(&self.weight);
+            for (c, ((st, si), &w)) in channels.enumerate() {
                 for (i, &k) in self.index[r].iter().enumerate() {
                     let row = self.offsets[r] + i * s + c;
                     for j in 0..p {
-                        jac[(row, j)] = -w * sc[(k, j)];
+                        jac[(row, j)] = -w * st[(k, j)];
                     }
                     if self.fixed_initial.is_none() {
                         for i in 0..s {
-                            jac[(row, p + r * s + i)] = -w * sc[(k, p + i)];
+                            jac[(row, p + r * s + i)] = -w * si[(k, i)];
                         }
                     }
                 }

@@ -214,10 +214,20 @@ pub(super) fn parse(
             why: "a recording needs data rows after the header".into(),
         });
     }
-    let [t, v_ref, w_ref, v, w] = req;
-    let mut opt = opt.into_iter();
+    Ok(recording_of(source, meta, req, opt))
+}
+
+/// The recording of the five required columns (in [`REQUIRED`] order) and the optional ones
+/// (in [`OPTIONAL`] order, `None` where absent).
+fn recording_of(
+    source: PathBuf,
+    meta: Vec<(String, String)>,
+    [t, v_ref, w_ref, v, w]: [Vec<f64>; 5],
+    optional: impl IntoIterator<Item = Option<Vec<f64>>>,
+) -> Recording {
+    let mut opt = optional.into_iter();
     let mut next = || opt.next().flatten();
-    Ok(Recording {
+    Recording {
         source,
         meta,
         t,
@@ -230,7 +240,7 @@ pub(super) fn parse(
         phi: next(),
         wl: next(),
         wr: next(),
-    })
+    }
 }
 
 /// A cell as a number: as it is, else with the blanks around it trimmed (`" 0.5 "`).
@@ -418,28 +428,14 @@ fn assemble(
     columns: Columns,
 ) -> Recording {
     let mut cols = cols.into_iter();
-    let mut req = || cols.next().unwrap_or_default();
-    let (t, v_ref, w_ref, v, w) = (req(), req(), req(), req(), req());
-    let mut opt = present.iter().map(|&p| {
-        if p && columns == Columns::All {
-            cols.next()
-        } else {
-            None
-        }
-    });
-    let mut next = || opt.next().flatten();
-    Recording {
-        source: path.to_owned(),
-        meta,
-        t,
-        v_ref,
-        w_ref,
-        v,
-        w,
-        x: next(),
-        y: next(),
-        phi: next(),
-        wl: next(),
-        wr: next(),
-    }
+    let req: [Vec<f64>; 5] = std::array::from_fn(|_| cols.next().unwrap_or_default());
+    let opt: Vec<Option<Vec<f64>>> = present
+        .iter()
+        .map(|&p| {
+            (p && columns == Columns::All)
+                .then(|| cols.next())
+                .flatten()
+        })
+        .collect();
+    recording_of(path.to_owned(), meta, req, opt)
 }
