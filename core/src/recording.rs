@@ -429,6 +429,21 @@ impl Recording {
         csv_read::read_file(path.as_ref(), columns)
     }
 
+    /// [`Recording::read_csv_columns`] with the rows split into `parts` parts whatever the
+    /// file's size (1: the sequential reader): for tests and fuzzing of the split reader, whose
+    /// answer must be the sequential one, error included.
+    ///
+    /// # Errors
+    /// As [`Recording::read_csv`].
+    #[doc(hidden)]
+    pub fn read_csv_in_parts(
+        path: impl AsRef<Path>,
+        columns: Columns,
+        parts: usize,
+    ) -> Result<Self> {
+        csv_read::read_file_in(path.as_ref(), columns, parts, 0)
+    }
+
     /// Parses recording CSV text; `source` names it in errors. A UTF-8 byte-order mark, CRLF
     /// line ends, blank lines and `#` comment lines among the rows are accepted (spreadsheet
     /// exports, hand-annotated logs); line numbers in errors count every line of the file.
@@ -682,6 +697,23 @@ mod tests {
                 "row {at}"
             );
             assert!(seq.is_err(), "row {at}: the edit must break the file");
+        }
+    }
+
+    #[test]
+    fn a_quoted_line_end_in_an_ignored_column_reads_as_one_row_in_parts_too() {
+        // Read sequentially, the quoted `note` holds a line end, so the second line is part of
+        // the first row; a split reader that took lines for rows would see three rows.
+        let text =
+            "t,v_ref,w_ref,v,w,note\n0,1,1,1,1,\"x\n1,1,1,1,1,y\"\n2,1,1,1,1,z\n3,1,1,1,1,z\n";
+        let dir = tempfile::tempdir().expect("tmp");
+        let path = dir.path().join("q.csv");
+        std::fs::write(&path, text).expect("writes");
+        let whole = Recording::read_csv_in_parts(&path, Columns::All, 1).expect("reads");
+        assert_eq!(whole.t, [0.0, 2.0, 3.0]);
+        for parts in 2..=4 {
+            let split = Recording::read_csv_in_parts(&path, Columns::All, parts).expect("reads");
+            assert_eq!(split, whole, "{parts} parts");
         }
     }
 

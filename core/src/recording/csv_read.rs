@@ -271,9 +271,22 @@ pub(super) const PARALLEL_MIN_BYTES: u64 = 4 << 20;
 /// Reads a recording file with its data rows split at line ends into one part per core of
 /// rayon's pool, each part parsed on its own thread from its own file handle (streaming, as
 /// [`parse`]). Any error or irregularity in any part — a bad cell, a ragged row, time not
-/// increasing, a quoted field across a split — makes it read the file again with [`parse`],
+/// increasing, a quote anywhere — makes it read the file again with [`parse`],
 /// whose error (file, line, column) is the one reported: the fast path never decides an error.
 pub(super) fn read_file(path: &Path, columns: Columns) -> Result<Recording> {
+    // At least two parts, so that the split path is the same on every machine.
+    let parts = rayon::current_num_threads().clamp(2, 8);
+    read_file_in(path, columns, parts, PARALLEL_MIN_BYTES)
+}
+
+/// [`read_file`] with the rows in `parts` parts (1: the sequential reader) when the file has
+/// at least `min_bytes` bytes.
+pub(super) fn read_file_in(
+    path: &Path,
+    columns: Columns,
+    parts: usize,
+    min_bytes: u64,
+) -> Result<Recording> {
     let io = |source| Error::Io {
         path: path.to_owned(),
         source,
@@ -290,10 +303,8 @@ pub(super) fn read_file(path: &Path, columns: Columns) -> Result<Recording> {
         }
         Ok(rec)
     };
-    // At least two parts, so that the split path is the same on every machine.
-    let threads = rayon::current_num_threads().clamp(2, 8);
     let len = std::fs::metadata(path).map_err(io)?.len();
-    if len < PARALLEL_MIN_BYTES {
+    if len < min_bytes || parts < 2 {
         return sequential();
     }
     let mut head = std::io::BufReader::new(std::fs::File::open(path).map_err(io)?);
@@ -312,7 +323,7 @@ pub(super) fn read_file(path: &Path, columns: Columns) -> Result<Recording> {
     };
     let opt_present: Vec<bool> = OPTIONAL.iter().map(|n| find(n).is_some()).collect();
     let wanted: Vec<usize> = req.iter().chain(&opt).copied().collect();
-    let Some(bounds) = split_points(path, start, len, threads) else {
+    let Some(bounds) = split_points(path, start, len, parts) else {
         return sequential();
     };
     let parts: Vec<Option<Vec<Vec<f64>>>> = {
@@ -332,14 +343,14 @@ pub(super) fn read_file(path: &Path, columns: Columns) -> Result<Recording> {
     }
 }
 
-/// `threads + 1` byte offsets from `start` to `len`, each inner one moved to just after the
+/// `parts + 1` byte offsets from `start` to `len`, each inner one moved to just after the
 /// next line end; `None` if a part would be empty.
-fn split_points(path: &Path, start: u64, len: u64, threads: usize) -> Option<Vec<u64>> {
+fn split_points(path: &Path, start: u64, len: u64, parts: usize) -> Option<Vec<u64>> {
     use std::io::{Seek, SeekFrom};
     let mut points = vec![start];
     let mut file = std::io::BufReader::new(std::fs::File::open(path).ok()?);
-    for i in 1..threads as u64 {
-        let guess = start + (len - start) * i / threads as u64;
+    for i in 1..parts as u64 {
+        let guess = start + (len - start) * i / parts as u64;
         file.seek(SeekFrom::Start(guess)).ok()?;
         let mut skipped = Vec::new();
         let n = file.read_until(b'\n', &mut skipped).ok()? as u64;
@@ -366,9 +377,12 @@ fn parse_part(
     let mut file = std::fs::File::open(path).ok()?;
     file.seek(SeekFrom::Start(a)).ok()?;
     let input = std::io::BufReader::with_capacity(1 << 20, file.take(b - a));
+    // Quotes are not special here, and a part with any quote goes back to the sequential
+    // reader: a quoted field may span a split (or hide a line end in an ignored column).
     let mut rdr = csv::ReaderBuilder::new()
         .has_headers(false)
         .flexible(true)
+        .quoting(false)
         .comment(Some(b'#'))
         .buffer_capacity(1 << 16)
         .from_reader(input);
@@ -377,7 +391,7 @@ fn parse_part(
     let mut cols: Vec<Vec<f64>> = wanted.iter().map(|_| Vec::with_capacity(guess)).collect();
     let mut record = csv::ByteRecord::new();
     while rdr.read_byte_record(&mut record).ok()? {
-        if record.len() != width {
+        if record.len() != width || record.as_slice().contains(&b'"') {
             return None;
         }
         for (col, &i) in cols.iter_mut().zip(wanted) {
