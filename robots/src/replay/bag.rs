@@ -217,12 +217,7 @@ fn check_attachments(path: &Path) -> Result<(), String> {
 /// 0.26's reader subtracts their lengths from what remains unchecked). A compressed chunk, or
 /// a body too short to tell, passes: the reader reports those itself.
 fn chunk_records_fit(body: &[u8]) -> Option<()> {
-    let u32_at = |at: usize| -> Option<usize> {
-        Some(u32::from_le_bytes(body.get(at..at + 4)?.try_into().ok()?) as usize)
-    };
-    let u64_at = |at: usize| -> Option<u64> {
-        Some(u64::from_le_bytes(body.get(at..at + 8)?.try_into().ok()?))
-    };
+    let (u32_at, u64_at) = (|at| u32_at(body, at), |at| u64_at(body, at));
     let Some(compression_len) = u32_at(28) else {
         return Some(());
     };
@@ -245,14 +240,25 @@ fn chunk_records_fit(body: &[u8]) -> Option<()> {
     Some(())
 }
 
+/// The little-endian u32 at byte `at` of `body`, as a length; `None` past its end.
+fn u32_at(body: &[u8], at: usize) -> Option<usize> {
+    let bytes = body.get(at..at.checked_add(4)?)?;
+    Some(u32::from_le_bytes(bytes.try_into().ok()?) as usize)
+}
+
+/// The little-endian u64 at byte `at` of `body`; `None` past its end.
+fn u64_at(body: &[u8], at: usize) -> Option<u64> {
+    let bytes = body.get(at..at.checked_add(8)?)?;
+    Some(u64::from_le_bytes(bytes.try_into().ok()?))
+}
+
 /// Whether an attachment record's body holds its header, its data and the CRC.
 fn attachment_fits(body: &[u8]) -> Option<()> {
-    let u32_at = |at: usize| -> Option<usize> {
-        Some(u32::from_le_bytes(body.get(at..at + 4)?.try_into().ok()?) as usize)
-    };
-    let name_end = 16usize.checked_add(4)?.checked_add(u32_at(16)?)?;
-    let media_end = name_end.checked_add(4)?.checked_add(u32_at(name_end)?)?;
-    let data_len = u64::from_le_bytes(body.get(media_end..media_end + 8)?.try_into().ok()?);
+    let name_end = 16usize.checked_add(4)?.checked_add(u32_at(body, 16)?)?;
+    let media_end = name_end
+        .checked_add(4)?
+        .checked_add(u32_at(body, name_end)?)?;
+    let data_len = u64_at(body, media_end)?;
     let end = (media_end as u64)
         .checked_add(8)?
         .checked_add(data_len)?
