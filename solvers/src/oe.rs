@@ -225,6 +225,10 @@ struct Problem<'a, M: ?Sized> {
     last_simulation: RefCell<Option<(na::DVector<f64>, Vec<Simulation>)>>,
 }
 
+/// A minimisation's end: the problem at θ̂, its raw residuals (per recording and channel),
+/// the residual evaluations, and how the last pass ended.
+type Minimised<'a, M> = (Problem<'a, M>, Vec<Vec<Vec<f64>>>, usize, TerminationReason);
+
 /// One central-difference column: parameter index, step, outputs at +step and −step.
 type FdColumn = (usize, f64, Vec<Vec<f64>>, Vec<Vec<f64>>);
 
@@ -478,6 +482,21 @@ impl OutputError {
         theta0: &[f64],
     ) -> Result<OutputErrorFit, SolveError> {
         let clock = Instant::now();
+        let problem = self.problem(model, recordings, theta0)?;
+        let (problem, raw, evaluations, termination) = self.minimise(problem)?;
+        let mut fit = self.uncertainty(problem, &raw, termination)?;
+        fit.evaluations = evaluations;
+        fit.seconds = clock.elapsed().as_secs_f64();
+        Ok(fit)
+    }
+
+    /// Checks the inputs of [`OutputError::fit`] and sets up its problem at `theta0`.
+    fn problem<'a, M: DynamicModel + ?Sized>(
+        &self,
+        model: &'a M,
+        recordings: &'a [Recording],
+        theta0: &[f64],
+    ) -> Result<Problem<'a, M>, SolveError> {
         let p = model.params().len();
         let s = model.channels().len();
         if s != 2 {
@@ -565,7 +584,7 @@ impl OutputError {
         if self.estimate_initial {
             u0.extend(first.iter().flatten());
         }
-        let mut problem = Problem {
+        Ok(Problem {
             model,
             recs: recordings,
             weight: vec![1.0; s],
@@ -579,7 +598,18 @@ impl OutputError {
             rows,
             last_jacobian: RefCell::new(None),
             last_simulation: RefCell::new(None),
-        };
+        })
+    }
+
+    /// Minimises the problem's cost by Levenberg–Marquardt, passes re-weighting the channels
+    /// (module doc); returns the problem at θ̂ with its raw residuals, the residual
+    /// evaluations and how the last pass ended.
+    fn minimise<'a, M: DynamicModel + ?Sized>(
+        &self,
+        mut problem: Problem<'a, M>,
+    ) -> Result<Minimised<'a, M>, SolveError> {
+        let s = problem.nch();
+        let (active, unknowns) = (problem.rows, problem.u.len());
         let lm = LevenbergMarquardt::new()
             .with_ftol(self.tolerance)
             .with_xtol(self.tolerance)
@@ -634,6 +664,22 @@ impl OutputError {
                 SolveError::Numerical("the fitted model does not simulate".into())
             })?;
         }
+        Ok((problem, raw, evaluations, termination))
+    }
+
+    /// The fit at the problem's θ̂: the sandwich covariance (module doc) from the last
+    /// iteration's Jacobian when it was taken there, else a new one; `evaluations` and
+    /// `seconds` are the caller's to fill.
+    fn uncertainty<M: DynamicModel + ?Sized>(
+        &self,
+        problem: Problem<'_, M>,
+        raw: &[Vec<Vec<f64>>],
+        termination: TerminationReason,
+    ) -> Result<OutputErrorFit, SolveError> {
+        let (model, recordings) = (problem.model, problem.recs);
+        let (p, s) = (problem.p(), problem.nch());
+        let (rows, unknowns) = (problem.rows, problem.u.len());
+        let active = rows;
         let status = match termination {
             TerminationReason::LostPatience => SolveStatus::IterationLimit,
             TerminationReason::NoImprovementPossible(_) => SolveStatus::AlmostSolved,
@@ -643,7 +689,7 @@ impl OutputError {
         // taken at θ̂ or within the last, converged step of it.
         let u = problem.u.clone();
         let theta = problem.theta_of(&u);
-        let noise_std = channel_std(&raw, &problem.mask, active, unknowns);
+        let noise_std = channel_std(raw, &problem.mask, active, unknowns);
         let cached = problem
             .last_jacobian
             .take()
@@ -736,12 +782,12 @@ impl OutputError {
             noise_std,
             cost: e.norm_squared(),
             residuals: active,
-            evaluations,
+            evaluations: 0,
             status,
             bound_state,
             correlation_lags: lags,
             jacobian,
-            seconds: clock.elapsed().as_secs_f64(),
+            seconds: 0.0,
         })
     }
 }
