@@ -271,7 +271,7 @@ pub(super) const PARALLEL_MIN_BYTES: u64 = 4 << 20;
 /// Reads a recording file with its data rows split at line ends into one part per core of
 /// rayon's pool, each part parsed on its own thread from its own file handle (streaming, as
 /// [`parse`]). Any error or irregularity in any part — a bad cell, a ragged row, time not
-/// increasing, a quote anywhere — makes it read the file again with [`parse`],
+/// increasing, a quote anywhere, a header line that is not one plain record — makes it read the file again with [`parse`],
 /// whose error (file, line, column) is the one reported: the fast path never decides an error.
 pub(super) fn read_file(path: &Path, columns: Columns) -> Result<Recording> {
     // At least two parts, so that the split path is the same on every machine.
@@ -312,7 +312,14 @@ pub(super) fn read_file_in(
         return sequential();
     };
     let start = pre.data_offset;
-    let headers: Vec<&str> = pre.header.trim_end().split(',').map(str::trim).collect();
+    // The header must read as one plain record, as the sequential reader's csv parser reads it:
+    // a carriage return inside the line ends a record there, a quote changes the fields.
+    let line = pre.header.strip_suffix('\n').unwrap_or(&pre.header);
+    let line = line.strip_suffix('\r').unwrap_or(line);
+    if line.contains(['\r', '"']) {
+        return sequential();
+    }
+    let headers: Vec<&str> = line.split(',').map(str::trim).collect();
     let find = |name: &str| headers.iter().position(|h| *h == name);
     let Some(req): Option<Vec<usize>> = REQUIRED.iter().map(|n| find(n)).collect() else {
         return sequential();
