@@ -8,7 +8,7 @@
 use criterion::{Criterion, criterion_group, criterion_main};
 use wheelid::core::condition::{self, ConditionSettings};
 use wheelid::core::{Conditioned, Recording};
-use wheelid::identify::{Estimator, IdentifySettings, identify};
+use wheelid::identify::{IdentifySettings, identify};
 use wheelid::models::VwPd;
 use wheelid::robots::{Excitation, RobotProfile, SimSettings, simulate_recording};
 use wheelid::solvers::{InstrumentalVariables, Ols, OutputError};
@@ -31,7 +31,7 @@ fn recording(robot: &RobotProfile) -> Recording {
 
 fn least_squares(rec: &Recording) -> (Vec<f64>, f64) {
     let ls = IdentifySettings {
-        estimator: Estimator::Ls,
+        estimator: "ls".into(),
         ..IdentifySettings::default()
     };
     let id = identify(std::slice::from_ref(rec), &VwPd, &Ols::default(), &ls).expect("ls");

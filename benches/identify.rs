@@ -7,7 +7,7 @@
 //! numpy gradient, lstsq) is `benches/identify_scipy.py`.
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use wheelid::identify::{Estimator, IdentifySettings, identify};
+use wheelid::identify::{IdentifySettings, identify};
 use wheelid::models::VwPd;
 use wheelid::robots::{Excitation, RobotProfile, SimSettings, simulate_recording};
 use wheelid::solvers::Ols;
@@ -27,7 +27,7 @@ fn bench_identify(c: &mut Criterion) {
             .expect("writes the recording for the scipy comparison");
     }
     let ls = IdentifySettings {
-        estimator: Estimator::Ls,
+        estimator: "ls".into(),
         ..IdentifySettings::default()
     };
     let mut group = c.benchmark_group("identify");

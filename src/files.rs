@@ -134,7 +134,7 @@ impl ModelFile {
         Self {
             model: id.model.clone(),
             robot: None,
-            estimator: Some(id.estimator.name().to_owned()),
+            estimator: Some(id.estimator.clone()),
             theta: id.theta.clone(),
             std_err: id.std_err.clone(),
             cutoff_hz: id.cutoff_hz,

@@ -7,7 +7,8 @@
 //! 2. **model**: build each recording's regression (eq. 4.2) and stack them per channel;
 //! 3. **fit** each channel's stacked problem with the solver (eq. 4.3–4.7, by SVD or
 //!    with bounds) — the least-squares answer — and then, unless least squares was asked for,
-//!    remove its errors-in-variables bias with the chosen [`Estimator`]: output error
+//!    remove its errors-in-variables bias with the chosen estimator
+//!    ([`wheelid_core::Estimator`], by name; [`crate::estimators`] and plugins'): output error
 //!    (`wheelid_solvers::oe`, the default) or instrumental variables (`wheelid_solvers::iv`),
 //!    both started from the least-squares θ; output error runs on the recordings' own stamps
 //!    (non-uniform ones included) and, where a recording does not state how its host stamped
@@ -19,11 +20,11 @@
 use std::borrow::Cow;
 use std::path::PathBuf;
 
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 use wheelid_core::condition::{ConditionSettings, CutoffChoice};
 use wheelid_core::{
-    BoundState, ChannelRegression, Conditioned, Recording, RegressorModel, SolveError, SolveStatus,
-    Solver,
+    BoundState, ChannelRegression, Conditioned, Estimator, Recording, RegressorModel, SolveError,
+    SolveStatus, Solver,
 };
 
 use crate::timing::TimingReport;
@@ -60,15 +61,17 @@ pub enum IdentifyError {
 }
 
 /// Settings of an identification run (separate from its result, [`Identification`]).
-#[derive(Debug, Clone, PartialEq, Default)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct IdentifySettings {
     /// Conditioning (cut-off, filter order, derivative stencil).
     pub condition: ConditionSettings,
     /// Bounds on θ (lower, upper) for bounded solvers, one per parameter (kept by the
     /// bounded least-squares solver and by output error; the IV answer is projected onto them).
     pub bounds: Option<Vec<(f64, f64)>>,
-    /// The estimator whose θ is the answer.
-    pub estimator: Estimator,
+    /// The name of the estimator whose θ is the answer: `ls` (the thesis's filtered
+    /// regression, Laut 2011 eq. 4.3–4.7), `iv` (instrumental variables), `oe` (output error,
+    /// the default) or a plugin's ([`crate::registry::Registry`]).
+    pub estimator: String,
     /// Also run the other estimators and report every θ side by side.
     pub compare: bool,
     /// Return the estimate asked for even when no estimate is a model (flagged in
@@ -77,33 +80,14 @@ pub struct IdentifySettings {
     pub allow_invalid: bool,
 }
 
-/// How θ is estimated from the recordings.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
-#[serde(rename_all = "snake_case")]
-pub enum Estimator {
-    /// Least squares on the filtered regression (Laut 2011 eq. 4.3–4.7): fast, but biased when
-    /// the regressors are noisy or coarsely sampled (errors in variables).
-    Ls,
-    /// Instrumental variables with simulated noise-free instruments, iterated
-    /// (`wheelid_solvers::iv`): linear and fast; removes the noise bias, not the
-    /// discretization error of the derivatives.
-    Iv,
-    /// Output error: θ whose free-run simulation matches the measurements
-    /// (`wheelid_solvers::oe`): no filter, no derivative, no cut-off in the answer.
-    #[default]
-    Oe,
-}
-
-impl Estimator {
-    /// Every estimator, in report order.
-    pub const ALL: [Estimator; 3] = [Estimator::Ls, Estimator::Iv, Estimator::Oe];
-
-    /// Short name (`ls`, `iv`, `oe`).
-    pub fn name(self) -> &'static str {
-        match self {
-            Estimator::Ls => "ls",
-            Estimator::Iv => "iv",
-            Estimator::Oe => "oe",
+impl Default for IdentifySettings {
+    fn default() -> Self {
+        Self {
+            condition: ConditionSettings::default(),
+            bounds: None,
+            estimator: crate::estimators::oe::NAME.into(),
+            compare: false,
+            allow_invalid: false,
         }
     }
 }
@@ -111,8 +95,8 @@ impl Estimator {
 /// One estimator's answer, for the side-by-side report.
 #[derive(Debug, Clone, Serialize)]
 pub struct EstimateReport {
-    /// Which estimator.
-    pub estimator: Estimator,
+    /// Which estimator (its name: `ls`, `iv`, `oe`, a plugin's).
+    pub estimator: String,
     /// θ̂.
     pub theta: Vec<f64>,
     /// Standard errors of θ̂.
@@ -199,8 +183,8 @@ pub struct Identification {
     /// Parameter units.
     pub param_units: Vec<String>,
     /// The estimator whose answer `theta` is: the one asked for, or the best valid one when
-    /// it gave no model (`warnings` says why).
-    pub estimator: Estimator,
+    /// it gave no model (`warnings` says why); its name.
+    pub estimator: String,
     /// What the answer cannot say, in words: a fallback from the estimator asked for, a lag
     /// shorter than a sample, a poor free-run fit (pointing at `wheelid diagnose`).
     pub warnings: Vec<String>,
@@ -210,7 +194,7 @@ pub struct Identification {
     /// length; output error: sandwich from the Jacobian, see `wheelid_solvers::oe`).
     pub std_err: Vec<f64>,
     /// Every estimator run: least squares always (it is the start), the chosen one, and with
-    /// `compare` all of them, in [`Estimator::ALL`] order.
+    /// `compare` all of them, least squares first, then in the registry's order.
     pub estimates: Vec<EstimateReport>,
     /// How far θ moved from the least-squares answer, (θ̂ − θ̂_LS)/θ̂_LS in % per parameter:
     /// a large shift means the regression was biased (noise in the regressors, coarse sampling).
@@ -247,7 +231,8 @@ pub struct Identification {
 }
 
 /// Runs an identification of `model` with `solver` on `recordings` (one multi-experiment
-/// problem: each recording conditioned on its own, regressions stacked).
+/// problem: each recording conditioned on its own, regressions stacked), with the built-in
+/// estimators ([`crate::estimators::built_in`]); [`identify_with`] takes others too.
 ///
 /// # Errors
 /// [`IdentifyError`] for unreadable or too-short data, a rank-deficient or infeasible problem.
@@ -257,7 +242,31 @@ pub fn identify(
     solver: &dyn Solver,
     settings: &IdentifySettings,
 ) -> Result<Identification, IdentifyError> {
+    identify_with(
+        recordings,
+        model,
+        solver,
+        &crate::estimators::built_in(),
+        settings,
+    )
+}
+
+/// [`identify`] with the refining estimators `estimators` (built-ins and plugins', in report
+/// order, as [`crate::registry::Registry::estimators`] lists them): `settings.estimator`
+/// names least squares (`ls`) or one of them; with `settings.compare` every one runs.
+///
+/// # Errors
+/// [`IdentifyError::Setting`] for an estimator name not among them (listing the known ones);
+/// otherwise as [`identify`].
+pub fn identify_with(
+    recordings: &[Recording],
+    model: &dyn RegressorModel,
+    solver: &dyn Solver,
+    estimators: &[Box<dyn Estimator>],
+    settings: &IdentifySettings,
+) -> Result<Identification, IdentifyError> {
     check_settings(recordings, model, settings)?;
+    check_estimator(&settings.estimator, estimators)?;
     // 1. condition
     let data = prepare::prepare(recordings, settings)?;
     // 2.–3. model and fit: least squares, then the refining estimators asked for.
@@ -267,16 +276,17 @@ pub fn identify(
     checks::check_excitation(recordings)?;
     let mut estimates = vec![ls.report.clone()];
     let (mut free_runs, mut noise_std, mut timing) = (Vec::new(), None, None);
-    for refiner in estimators::REFINERS {
-        let e = refiner.estimator();
-        if e != settings.estimator && !settings.compare {
+    for estimator in estimators {
+        let name = estimator.name();
+        if name != settings.estimator && !settings.compare {
             continue;
         }
-        let refined = refiner.refine(model, &data, &ls.report.theta, settings)?;
+        let (report, refined) =
+            estimators::refine(estimator.as_ref(), model, &data, &ls.report.theta, settings)?;
         noise_std = refined.noise_std.or(noise_std);
         timing = refined.timing.or(timing);
-        free_runs.extend(refined.free_run.map(|f| (e, f)));
-        estimates.push(refined.report);
+        free_runs.extend(refined.free_run.map(|f| (report.estimator.clone(), f)));
+        estimates.push(report);
     }
     // Never a nonsense answer: the estimate asked for, or the best valid one.
     // A plugin's model that does not extend eq. 2.19 gets the finiteness and covariance
@@ -286,7 +296,7 @@ pub fn identify(
         e.invalid = checks::invalid(e, &e.bound_state, eq_2_19);
     }
     let (estimator, mut warnings) =
-        checks::choose(&estimates, settings.estimator, settings.allow_invalid)?;
+        checks::choose(&estimates, &settings.estimator, settings.allow_invalid)?;
     let chosen = estimates
         .iter()
         .find(|e| e.estimator == estimator)
@@ -359,6 +369,20 @@ pub fn identify(
         regressions: ls.regressions,
         timing,
     })
+}
+
+/// `name` is least squares or one of `estimators`.
+fn check_estimator(name: &str, estimators: &[Box<dyn Estimator>]) -> Result<(), IdentifyError> {
+    if name == crate::estimators::LEAST_SQUARES || estimators.iter().any(|e| e.name() == name) {
+        return Ok(());
+    }
+    let known: Vec<&str> = std::iter::once(crate::estimators::LEAST_SQUARES)
+        .chain(estimators.iter().map(|e| e.name()))
+        .collect();
+    Err(IdentifyError::Setting(format!(
+        "unknown estimator `{name}`; known estimators: {} (a plugin's with --plugin LIB)",
+        known.join(", ")
+    )))
 }
 
 /// At least one recording, and bounds (when given) for each of the model's parameters.

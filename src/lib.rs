@@ -30,12 +30,14 @@
 
 pub mod config;
 pub mod diagnose;
+pub mod estimators;
 pub mod export;
 pub mod files;
 pub mod identify;
 pub mod migrate;
 pub mod plot;
 pub mod plugins;
+pub mod registry;
 pub mod report;
 pub mod run;
 pub mod timing;

@@ -1,6 +1,6 @@
 //! The `wheelid` command.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
@@ -9,8 +9,10 @@ use wheelid::config::{
     robot_profile,
 };
 use wheelid::core::Columns;
+use wheelid::estimators;
 use wheelid::files::{ModelFile, read_bounds};
-use wheelid::identify::{Estimator, IdentifySettings, identify};
+use wheelid::identify::{IdentifySettings, identify_with};
+use wheelid::registry::Registry;
 use wheelid::robots::{
     Excitation, RobotProfile, SimSettings, TrajectorySpec, simulate_recording, track, track_robot,
 };
@@ -557,13 +559,14 @@ struct IdentifyArgs {
     #[arg(long, default_value = "vw-pd")]
     model: String,
     /// Plugin library to load first (repeatable): a path, or a bare name looked up beside
-    /// this executable (as in a run config's `plugins`); its models become `--model` choices.
+    /// this executable (as in a run config's `plugins`); its models become `--model` choices
+    /// and its estimators `--estimator` choices.
     #[arg(long)]
     plugin: Vec<PathBuf>,
-    /// Estimator: ls (the thesis's filtered regression), iv (instrumental variables) or oe
-    /// (output error, the default: unbiased, no cut-off in the answer).
-    #[arg(long, value_enum, default_value_t = Estimator::Oe)]
-    estimator: Estimator,
+    /// Estimator: ls (the thesis's filtered regression), iv (instrumental variables), oe
+    /// (output error, the default: unbiased, no cut-off in the answer), or a plugin's.
+    #[arg(long, default_value = "oe")]
+    estimator: String,
     /// Run every estimator and show their θ side by side.
     #[arg(long)]
     compare: bool,
@@ -595,7 +598,9 @@ struct IdentifyArgs {
 }
 
 fn run_identify(a: IdentifyArgs) -> Result<()> {
-    let model = wheelid::run::regressor_model(&a.model, &a.plugin)?;
+    let registry = Registry::load(Path::new(""), &a.plugin)?;
+    let model = registry.model(&a.model)?;
+    registry.check_estimator(&a.estimator)?;
     let solver = solvers::by_name(&a.solver).context("unknown solver")?;
     let (recordings, truth) = if a.files.is_empty() {
         let robot = RobotProfile::pioneer3dx();
@@ -624,17 +629,23 @@ fn run_identify(a: IdentifyArgs) -> Result<()> {
     let mut settings = IdentifySettings::default();
     settings.condition.cutoff_hz = a.cutoff;
     settings.condition.order = a.order;
-    settings.estimator = a.estimator;
+    settings.estimator.clone_from(&a.estimator);
     settings.compare = a.compare;
     if let Some(path) = &a.bounds {
-        if a.solver != "box" && a.estimator == Estimator::Ls {
+        if a.solver != "box" && a.estimator == estimators::LEAST_SQUARES {
             bail!(
                 "--bounds with --estimator ls needs --solver box (ordinary least squares is unbounded)"
             );
         }
         settings.bounds = Some(read_bounds(path, &a.model)?);
     }
-    let id = identify(&recordings, model.as_ref(), solver.as_ref(), &settings)?;
+    let id = identify_with(
+        &recordings,
+        model.as_ref(),
+        solver.as_ref(),
+        &registry.estimators()?,
+        &settings,
+    )?;
     if a.json {
         out!(
             "{}",
@@ -714,7 +725,8 @@ fn run_diagnose(a: DiagnoseArgs) -> Result<()> {
     let (cfg, base): (DiagnoseConfig, PathBuf) = read_toml_or_default(a.config.as_deref())?;
     let mut settings = cfg.settings();
     let name = a.model.clone().or(cfg.model.clone());
-    let model = wheelid::run::regressor_model(name.as_deref().unwrap_or("vw-pd"), &a.plugin)?;
+    let model =
+        Registry::load(Path::new(""), &a.plugin)?.model(name.as_deref().unwrap_or("vw-pd"))?;
     if let Some(c) = &a.candidates {
         settings.candidates = c
             .iter()

@@ -1,5 +1,5 @@
-//! Loading external plugins: shared libraries that add robots, models and solvers
-//! (`plugins = ["…/libfoo.so"]` in a run config). The plugin side is
+//! Loading external plugins: shared libraries that add robots, models, solvers and estimators
+//! (`plugins = ["…/libfoo.so"]` in a run config, `--plugin LIB` on a command line). The plugin side is
 //! [`wheelid_core::plugin`]; this is the host side.
 //!
 //! For each path, in this order — and nothing of the library runs before step 3 passes except
@@ -22,10 +22,10 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
 use wheelid_core::plugin::{
-    DECLARATION_SYMBOL, ModelFactory, PluginDeclaration, Registered, Registrar, RobotFactory,
-    SolverFactory,
+    DECLARATION_SYMBOL, EstimatorFactory, ModelFactory, PluginDeclaration, Registered, Registrar,
+    Registrations, RobotFactory, SolverFactory,
 };
-use wheelid_core::{RegressorModel, Robot, Solver};
+use wheelid_core::{Estimator, RegressorModel, Robot, Solver};
 
 /// Why a plugin could not be loaded.
 #[derive(Debug, thiserror::Error)]
@@ -67,7 +67,7 @@ pub enum PluginError {
     Duplicate {
         /// The file.
         path: PathBuf,
-        /// `robot`, `model` or `solver`.
+        /// `robot`, `model`, `solver` or `estimator`.
         kind: &'static str,
         /// The name.
         name: String,
@@ -96,12 +96,13 @@ impl<F: Copy, T: ?Sized> PluginEntry<F, T> {
     }
 }
 
-/// The robots, models and solvers that the loaded plugins registered.
+/// The robots, models, solvers and estimators that the loaded plugins registered.
 #[derive(Default)]
 pub struct Plugins {
     robots: Vec<(String, PluginEntry<RobotFactory, dyn Robot>)>,
     models: Vec<(String, PluginEntry<ModelFactory, dyn RegressorModel>)>,
     solvers: Vec<(String, PluginEntry<SolverFactory, dyn Solver>)>,
+    estimators: Vec<(String, PluginEntry<EstimatorFactory, dyn Estimator>)>,
 }
 
 /// Built-in type names that a plugin may not take.
@@ -112,6 +113,8 @@ pub struct BuiltIn<'a> {
     pub models: &'a [&'a str],
     /// Solver types.
     pub solvers: &'a [&'a str],
+    /// Estimator names.
+    pub estimators: &'a [&'a str],
 }
 
 impl Plugins {
@@ -126,7 +129,12 @@ impl Plugins {
         let library = open(path)?;
         let registrar = register(&library, path)?;
         // Names first, so that a clash adds nothing.
-        let (robots, models, solvers) = registrar.into_parts();
+        let Registrations {
+            robots,
+            models,
+            solvers,
+            estimators,
+        } = registrar.into_parts();
         check(path, "robot", &names(&robots), builtin.robots, &self.robots)?;
         check(path, "model", &names(&models), builtin.models, &self.models)?;
         check(
@@ -136,9 +144,17 @@ impl Plugins {
             builtin.solvers,
             &self.solvers,
         )?;
+        check(
+            path,
+            "estimator",
+            &names(&estimators),
+            builtin.estimators,
+            &self.estimators,
+        )?;
         self.robots.extend(entries(path, robots));
         self.models.extend(entries(path, models));
         self.solvers.extend(entries(path, solvers));
+        self.estimators.extend(entries(path, estimators));
         // Kept for the life of the process (module doc).
         if let Ok(mut libs) = LIBRARIES.lock() {
             libs.push(library);
@@ -160,12 +176,20 @@ impl Plugins {
     pub fn solver(&self, name: &str) -> Option<&PluginEntry<SolverFactory, dyn Solver>> {
         self.solvers.iter().find(|(n, _)| n == name).map(|(_, e)| e)
     }
-    /// Names of the plugin robots, models and solvers.
-    pub fn names(&self) -> [Vec<String>; 3] {
+    /// The estimator `name`, if a plugin registered it.
+    pub fn estimator(&self, name: &str) -> Option<&PluginEntry<EstimatorFactory, dyn Estimator>> {
+        self.estimators
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, e)| e)
+    }
+    /// Names of the plugin robots, models, solvers and estimators.
+    pub fn names(&self) -> [Vec<String>; 4] {
         [
-            self.robots.iter().map(|(n, _)| n.clone()).collect(),
-            self.models.iter().map(|(n, _)| n.clone()).collect(),
-            self.solvers.iter().map(|(n, _)| n.clone()).collect(),
+            names(&self.robots),
+            names(&self.models),
+            names(&self.solvers),
+            names(&self.estimators),
         ]
     }
 }
@@ -271,6 +295,7 @@ mod tests {
         robots: &[],
         models: &[],
         solvers: &[],
+        estimators: &[],
     };
 
     #[test]

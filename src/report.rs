@@ -56,7 +56,7 @@ pub fn to_text(id: &Identification, truth: Option<&[f64]>) -> String {
         s,
         "model {}  estimator {}  solver {}  samples {}  files {}",
         id.model,
-        id.estimator.name(),
+        id.estimator,
         id.solver,
         id.samples,
         id.files.len()
@@ -123,7 +123,7 @@ pub fn to_text(id: &Identification, truth: Option<&[f64]>) -> String {
     if id.estimates.len() > 1 {
         let _ = write!(s, "{:<8}", "param");
         for e in &id.estimates {
-            let _ = write!(s, " {:>12} {:>9}", e.estimator.name(), "± 2σ");
+            let _ = write!(s, " {:>12} {:>9}", e.estimator, "± 2σ");
         }
         let _ = writeln!(s, " {:>12}", "shift % vs ls");
         for i in 0..id.theta.len() {
@@ -148,13 +148,13 @@ pub fn to_text(id: &Identification, truth: Option<&[f64]>) -> String {
         })
         .map(|i| format!("{} {:+.1} %", id.param_names[i], id.ls_shift_percent[i]))
         .collect();
-    if id.estimator != crate::identify::Estimator::Ls && !moved.is_empty() {
+    if id.estimator != crate::estimators::LEAST_SQUARES && !moved.is_empty() {
         let _ = writeln!(
             s,
             "warning: {} moved {} from least squares, beyond 3 σ: the filtered regression is \
              biased here (noisy or coarsely sampled regressors), or the model misses physics \
              that the two estimators weigh differently — check the free-run fit",
-            id.estimator.name(),
+            id.estimator,
             moved.join(", "),
         );
         let _ = writeln!(s);

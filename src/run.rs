@@ -58,8 +58,9 @@ use wheelid_robots::{RobotProfile, SimRobot, SimSettings};
 
 use crate::config::{ExcitationConfig, robot_profile};
 use crate::files::{ModelFile, toml_msg};
-use crate::identify::{Estimator, Identification, IdentifySettings, identify};
-use crate::plugins::{BuiltIn, Plugins};
+use crate::identify::{Identification, IdentifySettings, identify_with};
+use crate::plugins::Plugins;
+use crate::registry::Registry;
 
 /// Where a spec's relative paths are resolved.
 pub struct RunContext<'a> {
@@ -99,12 +100,7 @@ pub trait SolverSpec: Debug {
     fn build(&self) -> Result<SolverWithBounds>;
 }
 
-/// The built-in robot types.
-pub const ROBOT_TYPES: [&str; 5] = ["simulator", "physics", "replay", "pioneer", "khepera"];
-/// The built-in model types.
-pub const MODEL_TYPES: [&str; 2] = ["vw-pd", "wheel-pd"];
-/// The built-in solver types.
-pub const SOLVER_TYPES: [&str; 2] = ["ols", "box"];
+pub use crate::registry::{MODEL_TYPES, ROBOT_TYPES, SOLVER_TYPES};
 
 /// `[robot] type = "simulator"`: the simulated robot of eq. 2.19 with encoders and optional
 /// effects.
@@ -346,8 +342,8 @@ impl SolverSpec for BoxSpec {
 #[derive(Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct IdentifySection {
-    /// `ls` (default), `iv` or `oe`.
-    pub estimator: Option<Estimator>,
+    /// `oe` (default), `iv`, `ls` or a plugin's estimator.
+    pub estimator: Option<toml::Spanned<String>>,
     /// Low-pass cut-off [Hz] (default: chosen from the data).
     pub cutoff_hz: Option<f64>,
     /// Butterworth order of one pass.
@@ -500,56 +496,6 @@ pub fn plugin_path(base: &Path, entry: &Path) -> PathBuf {
     }
 }
 
-/// Loads the plugin libraries `entries` ([`plugin_path`] against `base`), refusing names that
-/// clash with the built-in robots, models and solvers or with each other.
-///
-/// # Errors
-/// The first [`crate::plugins::PluginError`], naming its file.
-fn load_plugins(base: &Path, entries: &[PathBuf]) -> Result<Plugins> {
-    let mut plugins = Plugins::default();
-    let builtin = BuiltIn {
-        robots: &ROBOT_TYPES,
-        models: &MODEL_TYPES,
-        solvers: &SOLVER_TYPES,
-    };
-    for p in entries {
-        plugins.load(&plugin_path(base, p), &builtin)?;
-    }
-    Ok(plugins)
-}
-
-/// The regression model `name` for a command line (`identify`, `diagnose` with `--plugin`): a
-/// built-in ([`MODEL_TYPES`]) or one that the plugin libraries `plugins` register (each a
-/// path, or a bare library name beside the executable: [`plugin_path`]), made from the config
-/// table `type = "name"` (the plugin's defaults).
-///
-/// # Errors
-/// A plugin that does not load (naming the file), a factory's error, or an unknown name
-/// listing the known ones.
-pub fn regressor_model(name: &str, plugins: &[PathBuf]) -> Result<Box<dyn RegressorModel>> {
-    let loaded = load_plugins(Path::new(""), plugins)?;
-    if let Some(m) = wheelid_models::by_name(name) {
-        return Ok(m);
-    }
-    match loaded.model(name) {
-        Some(e) => e
-            .make(&format!("type = {name:?}\n"))
-            .map_err(|m| anyhow!("model `{name}` of {}: {m}", e.path.display())),
-        None => {
-            let [_, from_plugins, _] = loaded.names();
-            let known: Vec<String> = MODEL_TYPES
-                .iter()
-                .map(|s| (*s).to_owned())
-                .chain(from_plugins)
-                .collect();
-            Err(anyhow!(
-                "unknown model `{name}`; known models: {} (a plugin's with --plugin LIB)",
-                known.join(", ")
-            ))
-        }
-    }
-}
-
 /// Parses a run config's `text` (as read from `path`, which names it in errors) without
 /// loading plugins or driving anything: what `wheelid run` checks first (unknown keys, types,
 /// sections), with the line and column of the first error.
@@ -580,9 +526,10 @@ pub fn run(path: &Path, progress: bool) -> Result<RunOutput> {
         base,
         duration_s: file.duration_s.unwrap_or(150.0),
     };
-    // Plugins first: they may provide any of the three.
-    let plugins = load_plugins(base, &file.plugins)?;
-    let [plugin_robots, plugin_models, plugin_solvers] = plugins.names();
+    // Plugins first: they may provide any of the four.
+    let registry = Registry::load(base, &file.plugins)?;
+    let plugins = registry.plugins();
+    let [plugin_robots, plugin_models, plugin_solvers, _] = plugins.names();
     let table = |section, table| Table {
         section,
         table,
@@ -625,9 +572,10 @@ pub fn run(path: &Path, progress: bool) -> Result<RunOutput> {
             model.name()
         )));
     }
+    let estimator = estimator_named(file.identify.estimator.as_ref(), &registry, path, &text)?;
     let robot_t = table("robot", &file.robot);
     let kind = robot_t.kind()?;
-    let mut robot = connect_table(&robot_t, &plugins, &plugin_robots, &cx)?;
+    let mut robot = connect_table(&robot_t, plugins, &plugin_robots, &cx)?;
     let excitation = match &file.excitation {
         Some(e) => e.build()?,
         None => ExcitationConfig::ThesisPioneer.build()?,
@@ -649,7 +597,9 @@ pub fn run(path: &Path, progress: bool) -> Result<RunOutput> {
         bounds,
         ..IdentifySettings::default()
     };
-    settings.estimator = file.identify.estimator.unwrap_or_default();
+    if let Some(name) = estimator {
+        settings.estimator = name;
+    }
     settings.condition = ConditionSettings {
         cutoff_hz: file.identify.cutoff_hz,
         order: file
@@ -669,10 +619,11 @@ pub fn run(path: &Path, progress: bool) -> Result<RunOutput> {
         dir.join("report.json"),
     ];
     recording.write_csv(&files[0])?;
-    let identification = identify(
+    let identification = identify_with(
         std::slice::from_ref(&recording),
         model.as_ref(),
         solver.as_ref(),
+        &registry.estimators()?,
         &settings,
     )
     .with_context(|| format!("identifying (the drive is kept in {})", files[0].display()))?;
@@ -693,6 +644,30 @@ pub fn run(path: &Path, progress: bool) -> Result<RunOutput> {
         identification,
         files,
     })
+}
+
+/// The `[identify] estimator` of the config `text` (read from `path`), checked against the
+/// registry before anything is driven.
+///
+/// # Errors
+/// An unknown name, with the file, line and column of its value and the known names.
+fn estimator_named(
+    name: Option<&toml::Spanned<String>>,
+    registry: &Registry,
+    path: &Path,
+    text: &str,
+) -> Result<Option<String>> {
+    let Some(name) = name else { return Ok(None) };
+    registry.check_estimator(name.get_ref()).map_err(|e| {
+        let before = &text[..name.span().start.min(text.len())];
+        let line = before.matches('\n').count() + 1;
+        let column = before.chars().rev().take_while(|&c| c != '\n').count() + 1;
+        anyhow!(
+            "{}: line {line}, column {column}: [identify] estimator: {e}",
+            path.display()
+        )
+    })?;
+    Ok(Some(name.get_ref().clone()))
 }
 
 /// The robot of a `[robot]` table: a built-in backend or a plugin's.
@@ -738,15 +713,16 @@ pub fn connect_robot(path: &Path, duration_s: f64) -> Result<Box<dyn Robot>> {
         .map_err(|e| anyhow!("{}: {}", path.display(), toml_msg(&text, &e)))?;
     let base = path.parent().unwrap_or(Path::new(""));
     let cx = RunContext { base, duration_s };
-    let plugins = load_plugins(base, &file.plugins)?;
-    let [plugin_robots, _, _] = plugins.names();
+    let registry = Registry::load(base, &file.plugins)?;
+    let plugins = registry.plugins();
+    let [plugin_robots, _, _, _] = plugins.names();
     let robot_t = Table {
         section: "robot",
         table: &file.robot,
         file: path,
         text: &text,
     };
-    connect_table(&robot_t, &plugins, &plugin_robots, &cx)
+    connect_table(&robot_t, plugins, &plugin_robots, &cx)
 }
 
 /// Drives `robot` with `excitation` for `duration` seconds (`None`: until it has no more

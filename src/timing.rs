@@ -31,7 +31,6 @@
 //! Non-uniform recordings are fitted on their own stamps: the commands switch and the windows
 //! average where the stamps say, never interpolated onto a grid.
 
-use serde::Serialize;
 use wheelid_core::condition;
 use wheelid_core::{DynamicModel, Recording, SolveError, Timing, VelocitySampling};
 use wheelid_models::CommandOffset;
@@ -53,40 +52,7 @@ pub const MIN_OFFSET_SAMPLES: f64 = 0.1;
 /// while it still moves θ1 by ~1 % at the Khepera's 23 ms and 50 Hz.
 pub const INSTANT_MARGIN: f64 = 0.01;
 
-/// Where the timing used by a fit came from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum TimingSource {
-    /// Every recording states its convention (metadata).
-    Stated,
-    /// Estimated by the fit (no metadata, or some recordings without it).
-    Estimated,
-}
-
-/// The timing a fit used, for the report.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct TimingReport {
-    /// Stated or estimated.
-    pub source: TimingSource,
-    /// The stated convention (when every recording states the same one).
-    pub stated: Option<Timing>,
-    /// Output sampling used (stated, or the hypothesis the likelihood chose).
-    pub sampling: VelocitySampling,
-    /// Residual offset δ [s] under the winning hypothesis, when fitted and kept: its commands
-    /// act from t_k + δ (negative: before their stamps); 0 when stated or not significant.
-    pub offset_s: f64,
-    /// Standard error of the fitted residual offset [s] (0 when stated).
-    pub offset_std_s: f64,
-    /// The median sample period Δ [s] (the longest over the recordings).
-    pub period_s: f64,
-    /// −2 ln L of each convention fitted as a hypothesis (with its own offset), (convention,
-    /// value): the smaller wins (instants with a handicap, [`INSTANT_MARGIN`]).
-    pub hypotheses: Vec<(Timing, f64)>,
-    /// The convention the data point at: the stated one, or the hypothesis that won.
-    pub likely: Option<Timing>,
-    /// One sentence for the report.
-    pub summary: String,
-}
+pub use wheelid_core::estimator::{TimingReport, TimingSource};
 
 /// The output of [`fit_with_timing`]: the fit (θ followed by δ when estimated), the recordings
 /// as fitted (their sampling set), and the report.

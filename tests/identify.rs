@@ -4,7 +4,7 @@
 use nalgebra::{DMatrix, DVector};
 use wheelid::core::condition::{self, ConditionSettings};
 use wheelid::core::{BoundState, LinearProblem, Recording, RegressorModel, SolveError, Solver};
-use wheelid::identify::{Estimator, IdentifyError, IdentifySettings, identify};
+use wheelid::identify::{IdentifyError, IdentifySettings, identify};
 use wheelid::models::{VwPd, WheelPd, dynamics};
 use wheelid::robots::{Excitation, RobotProfile, SimSettings, simulate_recording};
 use wheelid::solvers::{BoxLs, Ols};
@@ -132,7 +132,7 @@ fn multi_file_run_equals_the_stacked_regression() {
     let (_, a) = pioneer_recording(1, true, 0.1);
     let (_, b) = pioneer_recording(2, true, 0.1);
     let mut s = IdentifySettings {
-        estimator: Estimator::Ls,
+        estimator: "ls".into(),
         ..IdentifySettings::default()
     };
     s.condition.cutoff_hz = Some(0.7);
@@ -208,7 +208,7 @@ fn a_turn_rate_that_never_changes_is_rank_deficient_and_names_theta2() {
 fn box_solver_holds_bounds_and_agrees_with_ols_when_inactive() {
     let (robot, rec) = pioneer_recording(3, true, 0.1);
     let ls = IdentifySettings {
-        estimator: Estimator::Ls,
+        estimator: "ls".into(),
         ..IdentifySettings::default()
     };
     let ols = identify(std::slice::from_ref(&rec), &VwPd, &Ols::default(), &ls).expect("ols");
@@ -237,7 +237,7 @@ fn box_solver_holds_bounds_and_agrees_with_ols_when_inactive() {
     assert!(robot.theta[0] > 0.2);
     // Output error keeps the same bound: θ1 ends on it, the others stay free.
     let oe = IdentifySettings {
-        estimator: Estimator::Oe,
+        estimator: "oe".into(),
         ..tight
     };
     let b = identify(&[rec], &VwPd, &Ols::default(), &oe).expect("oe");

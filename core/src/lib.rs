@@ -11,6 +11,7 @@
 pub mod condition;
 pub mod effect;
 pub mod error;
+pub mod estimator;
 pub mod metrics;
 pub mod model;
 pub mod plugin;
@@ -23,6 +24,7 @@ pub mod solver;
 pub use condition::{ConditionSettings, Conditioned, CutoffChoice};
 pub use effect::{Effect, EffectChannels, Force, Probe, Search, Terms, WheelTerms};
 pub use error::{Error, Location, Result};
+pub use estimator::{Estimate, Estimator, EstimatorInput, FreeRun, TimingReport, TimingSource};
 pub use model::{
     ChannelInfo, ChannelRegression, DynamicModel, ParamInfo, RegressorModel, Sensitivities,
     Simulation, extends_eq_2_19,

@@ -1,5 +1,5 @@
-//! The plugin API: how a separately compiled library (`cdylib`) adds robots, models and solvers
-//! to wheelid.
+//! The plugin API: how a separately compiled library (`cdylib`) adds robots, models, solvers
+//! and estimators to wheelid.
 //!
 //! Rust has no stable ABI, and typetag's registry cannot see registrations made inside a
 //! dynamically loaded library (typetag#94). So a plugin declares itself through one exported
@@ -17,7 +17,9 @@
 //! plugin designs) does the host call `register`, which fills a [`Registrar`] with factories:
 //! `type` name → `fn(toml_table_text) -> Result<Box<dyn …>, String>`. The host then routes a
 //! config's `[robot]`, `[model]` or `[solver]` table whose `type` it does not know itself to
-//! the factory registered under that name, passing the table as TOML text.
+//! the factory registered under that name, passing the table as TOML text; an estimator name
+//! it does not know (`--estimator NAME`, a config's `estimator = "NAME"`) goes to the
+//! estimator factory of that name with `type = "NAME"`.
 //!
 //! **Panics never cross.** A cdylib carries its own copy of std, and a panic unwinding from
 //! the plugin's std into the host's is a foreign exception that aborts the process. So every
@@ -32,6 +34,7 @@
 //! fn register(r: &mut wheelid_core::plugin::Registrar) {
 //!     r.robot("turtlebot3", |toml| Ok(Box::new(TurtleBot::from_toml(toml)?)));
 //!     r.model("vw-pd-coulomb", |_| Ok(Box::new(VwPdCoulomb)));
+//!     r.estimator("huber", |_| Ok(Box::new(Huber)));
 //! }
 //! wheelid_core::export_plugin!(register);
 //! ```
@@ -39,14 +42,14 @@
 use std::panic::{AssertUnwindSafe, catch_unwind};
 
 use crate::{
-    ChannelInfo, ChannelRegression, Conditioned, DynamicModel, Error, LinearFit, LinearProblem,
-    Odometry, ParamInfo, Recording, RegressorModel, Result, Robot, RobotError, Sensitivities,
-    Simulation, SolveError, Solver,
+    ChannelInfo, ChannelRegression, Conditioned, DynamicModel, Error, Estimate, Estimator,
+    EstimatorInput, LinearFit, LinearProblem, Odometry, ParamInfo, Recording, RegressorModel,
+    Result, Robot, RobotError, Sensitivities, Simulation, SolveError, Solver,
 };
 
 /// Version of this API (the declaration's layout, the registrar and the factory types); a
 /// plugin built against another is refused.
-pub const API_VERSION: u32 = 1;
+pub const API_VERSION: u32 = 2;
 
 /// The compiler that built this crate, with its host triple (from `rustc -vV`).
 pub const RUSTC_VERSION: &str = env!("WHEELID_RUSTC_VERSION");
@@ -63,6 +66,8 @@ pub type RobotFactory = fn(&str) -> std::result::Result<Box<dyn Robot>, String>;
 pub type ModelFactory = fn(&str) -> std::result::Result<Box<dyn RegressorModel>, String>;
 /// Makes a solver from its config table.
 pub type SolverFactory = fn(&str) -> std::result::Result<Box<dyn Solver>, String>;
+/// Makes an estimator from its config table (`type = "name"` and the plugin's keys).
+pub type EstimatorFactory = fn(&str) -> std::result::Result<Box<dyn Estimator>, String>;
 
 /// A factory with the trampoline that calls it under the plugin's own `catch_unwind` and
 /// wraps what it makes in a [`PanicGuard`] (both compiled into the plugin).
@@ -87,13 +92,29 @@ pub type Robots = Vec<(String, Registered<RobotFactory, dyn Robot>)>;
 pub type Models = Vec<(String, Registered<ModelFactory, dyn RegressorModel>)>;
 /// Named solver factories.
 pub type Solvers = Vec<(String, Registered<SolverFactory, dyn Solver>)>;
+/// Named estimator factories.
+pub type Estimators = Vec<(String, Registered<EstimatorFactory, dyn Estimator>)>;
 
-/// What a plugin registers: named factories of robots, models and solvers.
+/// Everything one plugin registered, by kind.
+#[derive(Default)]
+pub struct Registrations {
+    /// Robot backends.
+    pub robots: Robots,
+    /// Models.
+    pub models: Models,
+    /// Least-squares solvers.
+    pub solvers: Solvers,
+    /// Estimators ([`crate::estimator`]).
+    pub estimators: Estimators,
+}
+
+/// What a plugin registers: named factories of robots, models, solvers and estimators.
 #[derive(Default)]
 pub struct Registrar {
     robots: Robots,
     models: Models,
     solvers: Solvers,
+    estimators: Estimators,
     /// Set when the registration itself failed (a panic inside it).
     pub failure: Option<String>,
 }
@@ -152,9 +173,32 @@ impl Registrar {
         ));
     }
 
-    /// The registrations, taken apart: (robots, models, solvers).
-    pub fn into_parts(self) -> (Robots, Models, Solvers) {
-        (self.robots, self.models, self.solvers)
+    /// Registers an estimator of θ under the name `name` (what `--estimator` and a config's
+    /// `estimator` give).
+    pub fn estimator(&mut self, name: &str, factory: EstimatorFactory) {
+        let trampoline = |f: EstimatorFactory, toml: &str| {
+            guarded(|| f(toml)).and_then(|r| r).map(|e| {
+                let name = e.name().to_owned();
+                Box::new(PanicGuard { inner: e, name }) as Box<dyn Estimator>
+            })
+        };
+        self.estimators.push((
+            name.to_owned(),
+            Registered {
+                factory,
+                trampoline,
+            },
+        ));
+    }
+
+    /// The registrations, taken apart by kind.
+    pub fn into_parts(self) -> Registrations {
+        Registrations {
+            robots: self.robots,
+            models: self.models,
+            solvers: self.solvers,
+            estimators: self.estimators,
+        }
     }
 
     /// The robots registered, by name.
@@ -168,6 +212,10 @@ impl Registrar {
     /// The solvers registered, by name.
     pub fn solvers(&self) -> &[(String, Registered<SolverFactory, dyn Solver>)] {
         &self.solvers
+    }
+    /// The estimators registered, by name.
+    pub fn estimators(&self) -> &[(String, Registered<EstimatorFactory, dyn Estimator>)] {
+        &self.estimators
     }
 }
 
@@ -381,6 +429,15 @@ impl RegressorModel for PanicGuard<dyn RegressorModel> {
     }
 }
 
+impl Estimator for PanicGuard<dyn Estimator> {
+    fn name(&self) -> &str {
+        &self.name
+    }
+    fn estimate(&self, input: &EstimatorInput<'_>) -> std::result::Result<Estimate, SolveError> {
+        guarded(|| self.inner.estimate(input)).map_err(SolveError::Numerical)?
+    }
+}
+
 impl Solver for PanicGuard<dyn Solver> {
     fn name(&self) -> &str {
         &self.name
@@ -423,7 +480,7 @@ mod tests {
         bad.api_version = API_VERSION + 1;
         bad.rustc_version = padded("rustc 0.0.0");
         let e = bad.check().expect_err("refused");
-        assert!(e.contains("plugin API version 2"), "{e}");
+        assert!(e.contains("plugin API version 3"), "{e}");
         let mut bad = PluginDeclaration::new(reg);
         bad.rustc_version = padded("rustc 0.0.0 (abc) x86_64");
         let e = bad.check().expect_err("refused");
@@ -479,8 +536,13 @@ mod tests {
             run_registration(&mut r, |r| r.solver("broken", |_| Ok(Box::new(Broken)))),
             0
         );
-        let (robots, models, solvers) = r.into_parts();
-        assert!(robots.is_empty() && models.is_empty());
+        let Registrations {
+            robots,
+            models,
+            solvers,
+            estimators,
+        } = r.into_parts();
+        assert!(robots.is_empty() && models.is_empty() && estimators.is_empty());
         assert_eq!(solvers.len(), 1);
         assert_eq!(solvers[0].0, "broken");
         let solver = solvers[0].1.make("type = \"broken\"").expect("made");
@@ -497,6 +559,70 @@ mod tests {
             solver.solve(&problem).err(),
             Some(SolveError::Numerical(
                 "the plugin panicked: singular by design".into()
+            ))
+        );
+    }
+
+    struct PanickyEstimator;
+    impl Estimator for PanickyEstimator {
+        fn name(&self) -> &str {
+            "panicky"
+        }
+        fn estimate(&self, _: &EstimatorInput<'_>) -> std::result::Result<Estimate, SolveError> {
+            panic!("diverged on purpose")
+        }
+    }
+
+    /// A model with no parameters, enough to pose an estimator's input.
+    struct Empty;
+    impl DynamicModel for Empty {
+        fn name(&self) -> &str {
+            "empty"
+        }
+        fn params(&self) -> &[ParamInfo] {
+            &[]
+        }
+        fn channels(&self) -> &[ChannelInfo] {
+            &[]
+        }
+        fn simulate(&self, _: &[f64], _: &Recording, _: &[f64]) -> Result<Simulation> {
+            Ok(Vec::new())
+        }
+    }
+    impl RegressorModel for Empty {
+        fn regression(&self, _: &Conditioned) -> Result<Vec<ChannelRegression>> {
+            Ok(Vec::new())
+        }
+    }
+
+    #[test]
+    fn estimators_register_by_name_and_their_panics_become_solve_errors() {
+        let mut r = Registrar::default();
+        let code = run_registration(&mut r, |r| {
+            r.estimator("panicky", |_| Ok(Box::new(PanickyEstimator)));
+        });
+        assert_eq!(code, 0);
+        assert_eq!(r.estimators().len(), 1);
+        assert_eq!(r.estimators()[0].0, "panicky");
+        let estimator = r.estimators()[0]
+            .1
+            .make("type = \"panicky\"")
+            .expect("made");
+        assert_eq!(estimator.name(), "panicky");
+        let input = EstimatorInput {
+            model: &Empty,
+            recordings: &[],
+            conditioned: &[],
+            start: &[],
+            bounds: None,
+            cutoff_hz: 1.0,
+            condition: &crate::ConditionSettings::default(),
+            lags: 0,
+        };
+        assert_eq!(
+            estimator.estimate(&input).err(),
+            Some(SolveError::Numerical(
+                "the plugin panicked: diverged on purpose".into()
             ))
         );
     }

@@ -82,7 +82,7 @@ use wheelid_solvers::{Ols, OutputError, OutputErrorFit};
 pub use locate::{Band, ChannelLocation, Location, Share};
 use score::{Frame, Outputs, simulate_all};
 
-use crate::identify::{Estimator, IdentifySettings, identify};
+use crate::identify::{IdentifySettings, identify};
 
 /// Errors of a diagnosis.
 #[derive(Debug, thiserror::Error)]

@@ -248,7 +248,7 @@ fn nominal_fit(
         &Ols::default(),
         &IdentifySettings {
             condition: settings.condition.clone(),
-            estimator: Estimator::Ls,
+            estimator: crate::estimators::LEAST_SQUARES.into(),
             allow_invalid: true,
             ..IdentifySettings::default()
         },

@@ -13,7 +13,8 @@
 
 use wheelid_core::{BoundState, Recording};
 
-use super::{ChannelReport, EstimateReport, Estimator, IdentifyError};
+use super::{ChannelReport, EstimateReport, IdentifyError};
+use crate::estimators::{LEAST_SQUARES, iv, oe};
 
 /// Free-run fit % below which identify points at `wheelid diagnose`: the model explains less
 /// than 70 % of a channel's variation about its mean (the diagnosis calls a channel
@@ -92,38 +93,31 @@ pub(super) fn invalid(e: &EstimateReport, bound: &[BoundState], eq_2_19: bool) -
 }
 
 /// The estimator whose answer is reported: `asked` if its estimate is valid, else the first
-/// valid one of output error, instrumental variables, least squares (the order of their bias,
-/// least first); with the warnings that say so, and one for every other invalid estimate.
+/// valid one of output error, instrumental variables (the order of their bias, least first),
+/// any other estimator in the order they ran, least squares; with the warnings that say so,
+/// and one for every other invalid estimate.
 ///
 /// # Errors
 /// [`IdentifyError::NoModel`] if no estimate is valid, with each one's reason, unless
 /// `allow_invalid` (then the estimate asked for, with the warnings).
 pub(super) fn choose(
     estimates: &[EstimateReport],
-    asked: Estimator,
+    asked: &str,
     allow_invalid: bool,
-) -> Result<(Estimator, Vec<String>), IdentifyError> {
-    let find = |e: Estimator| estimates.iter().find(|x| x.estimator == e);
-    let preference = std::iter::once(asked).chain(
-        [Estimator::Oe, Estimator::Iv, Estimator::Ls]
-            .into_iter()
-            .filter(|&e| e != asked),
-    );
+) -> Result<(String, Vec<String>), IdentifyError> {
+    let mut preference: Vec<&str> = vec![asked, oe::NAME, iv::NAME];
+    preference.extend(estimates.iter().map(|e| e.estimator.as_str()));
+    preference.push(LEAST_SQUARES);
     let answer = preference
-        .filter_map(find)
+        .iter()
+        .filter_map(|&name| estimates.iter().find(|x| x.estimator == name))
         .find(|e| e.invalid.is_none())
-        .map(|e| e.estimator)
+        .map(|e| e.estimator.as_str())
         .or(allow_invalid.then_some(asked));
     let Some(answer) = answer else {
         let why: Vec<String> = estimates
             .iter()
-            .map(|e| {
-                format!(
-                    "{}: {}",
-                    e.estimator.name(),
-                    e.invalid.as_deref().unwrap_or("?")
-                )
-            })
+            .map(|e| format!("{}: {}", e.estimator, e.invalid.as_deref().unwrap_or("?")))
             .collect();
         return Err(IdentifyError::NoModel(format!(
             "no estimator gave a model ({}); the recordings do not fit eq. 2.19 — run `wheelid \
@@ -135,26 +129,19 @@ pub(super) fn choose(
         .iter()
         .filter_map(|e| {
             let why = e.invalid.as_deref()?;
-            Some(if e.estimator == asked && answer == asked {
+            let name = &e.estimator;
+            Some(if name == asked && answer == asked {
+                format!("{name} gave no model: {why}; no estimator did")
+            } else if name == asked {
                 format!(
-                    "{} gave no model: {why}; no estimator did",
-                    e.estimator.name()
-                )
-            } else if e.estimator == asked {
-                format!(
-                    "{} gave no model: {why}; the answer is {}'s, the best valid estimate",
-                    e.estimator.name(),
-                    answer.name()
+                    "{name} gave no model: {why}; the answer is {answer}'s, the best valid estimate"
                 )
             } else {
-                format!(
-                    "{}'s estimate is no model ({why}); not used",
-                    e.estimator.name()
-                )
+                format!("{name}'s estimate is no model ({why}); not used")
             })
         })
         .collect();
-    Ok((answer, warnings))
+    Ok((answer.to_owned(), warnings))
 }
 
 /// A warning per channel whose free-run fit is below [`POOR_FIT_PERCENT`], pointing at
@@ -209,12 +196,11 @@ pub(super) fn lag_notices(theta: &[f64], dt: f64) -> Vec<String> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::identify::Estimator;
     use wheelid_core::SolveStatus;
 
     fn estimate(theta: [f64; 6], std_err: [f64; 6]) -> EstimateReport {
         EstimateReport {
-            estimator: Estimator::Oe,
+            estimator: oe::NAME.into(),
             theta: theta.to_vec(),
             std_err: std_err.to_vec(),
             status: SolveStatus::Solved,

@@ -1,18 +1,18 @@
 //! Step 3 of [`super::identify`]: the estimators. Least squares (Laut 2011 eq. 4.3–4.7) always
-//! runs — it is every other estimator's start — and each refining estimator is one
-//! [`Refiner`] in [`REFINERS`], run when asked for or compared.
+//! runs — it is every other estimator's start — and each refining estimator
+//! ([`wheelid_core::Estimator`]: the built-ins of [`crate::estimators`] and plugins') is run
+//! by [`refine`] when asked for or compared.
 
 use std::time::Instant;
 
 use wheelid_core::{
-    BoundState, ChannelRegression, LinearProblem, Recording, RegressorModel, SolveStatus, Solver,
-    metrics,
+    BoundState, ChannelRegression, Estimate, Estimator, EstimatorInput, LinearProblem,
+    RegressorModel, SolveStatus, Solver, metrics,
 };
-use wheelid_solvers::{InstrumentalVariables, OutputError};
 
 use super::prepare::Prepared;
-use super::{EstimateReport, Estimator, IdentifyError, IdentifySettings};
-use crate::timing::{TimingReport, fit_with_timing};
+use super::{EstimateReport, IdentifyError, IdentifySettings};
+use crate::estimators::LEAST_SQUARES;
 
 /// Least squares' answer with what the report needs of its regression.
 pub(super) struct LeastSquares {
@@ -87,7 +87,7 @@ pub(super) fn least_squares(
     }
     Ok(LeastSquares {
         report: EstimateReport {
-            estimator: Estimator::Ls,
+            estimator: LEAST_SQUARES.into(),
             theta,
             std_err,
             status: SolveStatus::Solved,
@@ -104,156 +104,55 @@ pub(super) fn least_squares(
     })
 }
 
-/// How an output-error answer is simulated: its estimated initial states, timing offset and the
-/// recordings on the stamps it fitted.
-pub(super) struct FreeRun {
-    /// (v0, ω0) per recording.
-    pub initial: Vec<Vec<f64>>,
-    /// The command-to-response offset δ [s] it estimated, if it did.
-    pub offset: Option<f64>,
-    /// The recordings as it fitted them (restamped, on their own stamps).
-    pub recordings: Vec<Recording>,
-}
-
-/// A refining estimator's answer.
-pub(super) struct Refined {
-    /// The estimate.
-    pub report: EstimateReport,
-    /// How to simulate it, when it differs from the recordings as conditioned.
-    pub free_run: Option<FreeRun>,
-    /// Residual standard deviation per channel, when the estimator measures it.
-    pub noise_std: Option<Vec<f64>>,
-    /// The stamping convention used, stated or estimated.
-    pub timing: Option<TimingReport>,
-}
-
-/// An estimator that starts from least squares' θ and removes its errors-in-variables bias.
-pub(super) trait Refiner: Sync {
-    /// Which estimator this is.
-    fn estimator(&self) -> Estimator;
-
-    /// Its answer for `model` on `data`, started from the least-squares `ls_theta`.
-    ///
-    /// # Errors
-    /// [`IdentifyError::Solve`] naming the estimator when its problem cannot be solved.
-    fn refine(
-        &self,
-        model: &dyn RegressorModel,
-        data: &Prepared<'_>,
-        ls_theta: &[f64],
-        settings: &IdentifySettings,
-    ) -> Result<Refined, IdentifyError>;
-}
-
-/// The refining estimators, in report order ([`Estimator::ALL`] after least squares).
-pub(super) const REFINERS: [&dyn Refiner; 2] = [&Iv, &Oe];
-
-/// Instrumental variables (`wheelid_solvers::iv`), projected onto the bounds when given.
-struct Iv;
-
-impl Refiner for Iv {
-    fn estimator(&self) -> Estimator {
-        Estimator::Iv
-    }
-
-    fn refine(
-        &self,
-        model: &dyn RegressorModel,
-        data: &Prepared<'_>,
-        ls_theta: &[f64],
-        settings: &IdentifySettings,
-    ) -> Result<Refined, IdentifyError> {
-        let clock = Instant::now();
-        let fit = InstrumentalVariables::default()
-            .fit(
-                model,
-                &data.conditioned,
-                ls_theta,
-                data.cutoff_hz,
-                &settings.condition,
-                data.lags,
-            )
-            .map_err(|source| IdentifyError::Solve {
-                channel: "iv".into(),
-                source,
-            })?;
-        let mut theta = fit.theta.clone();
-        let mut bound_state = vec![BoundState::Free; theta.len()];
-        if let Some(b) = &settings.bounds {
-            for (i, (t, s)) in theta.iter_mut().zip(&mut bound_state).enumerate() {
-                if *t < b[i].0 {
-                    *t = b[i].0;
-                    *s = BoundState::AtLower;
-                } else if *t > b[i].1 {
-                    *t = b[i].1;
-                    *s = BoundState::AtUpper;
-                }
-            }
-        }
-        Ok(Refined {
-            report: EstimateReport {
-                estimator: Estimator::Iv,
-                theta,
-                std_err: fit.std_err,
-                status: fit.status,
-                bound_state,
-                invalid: None,
-                iterations: fit.iterations,
-                seconds: clock.elapsed().as_secs_f64(),
-            },
-            free_run: None,
-            noise_std: None,
-            timing: None,
-        })
-    }
-}
-
-/// Output error (`wheelid_solvers::oe`) on the recordings' own stamps, with the timing offset
-/// where a recording does not state its stamping ([`crate::timing`]).
-struct Oe;
-
-impl Refiner for Oe {
-    fn estimator(&self) -> Estimator {
-        Estimator::Oe
-    }
-
-    fn refine(
-        &self,
-        model: &dyn RegressorModel,
-        data: &Prepared<'_>,
-        ls_theta: &[f64],
-        settings: &IdentifySettings,
-    ) -> Result<Refined, IdentifyError> {
-        let oe = OutputError {
-            bounds: settings.bounds.clone(),
-            ..OutputError::default()
-        };
-        let timed = fit_with_timing(model, &data.restamped, ls_theta, &oe).map_err(|source| {
-            IdentifyError::Solve {
-                channel: "oe".into(),
-                source,
-            }
+/// Runs `estimator` on the prepared data from least squares' `ls_theta`, and times it.
+///
+/// # Errors
+/// [`IdentifyError::Solve`] naming the estimator when its problem cannot be solved.
+pub(super) fn refine(
+    estimator: &dyn Estimator,
+    model: &dyn RegressorModel,
+    data: &Prepared<'_>,
+    ls_theta: &[f64],
+    settings: &IdentifySettings,
+) -> Result<(EstimateReport, Estimate), IdentifyError> {
+    let clock = Instant::now();
+    let input = EstimatorInput {
+        model,
+        recordings: &data.restamped,
+        conditioned: &data.conditioned,
+        start: ls_theta,
+        bounds: settings.bounds.as_deref(),
+        cutoff_hz: data.cutoff_hz,
+        condition: &settings.condition,
+        lags: data.lags,
+    };
+    let name = estimator.name().to_owned();
+    let mut estimate = estimator
+        .estimate(&input)
+        .map_err(|source| IdentifyError::Solve {
+            channel: name.clone(),
+            source,
         })?;
-        let fit = timed.fit;
-        let p = model.params().len();
-        Ok(Refined {
-            report: EstimateReport {
-                estimator: Estimator::Oe,
-                theta: fit.theta[..p].to_vec(),
-                std_err: fit.std_err[..p].to_vec(),
-                status: fit.status,
-                bound_state: fit.bound_state[..p].to_vec(),
-                invalid: None,
-                iterations: fit.evaluations,
-                seconds: fit.seconds,
-            },
-            free_run: Some(FreeRun {
-                initial: fit.initial,
-                offset: timed.offset,
-                recordings: timed.recordings,
-            }),
-            noise_std: Some(fit.noise_std),
-            timing: Some(timed.timing),
-        })
+    let p = model.params().len();
+    if estimate.theta.len() != p || estimate.std_err.len() != p || estimate.bound_state.len() != p {
+        return Err(IdentifyError::Setting(format!(
+            "estimator `{name}` returned {} values of θ, {} standard errors and {} bound states \
+             for the {p} parameters of model `{}`",
+            estimate.theta.len(),
+            estimate.std_err.len(),
+            estimate.bound_state.len(),
+            model.name()
+        )));
     }
+    let report = EstimateReport {
+        estimator: name,
+        theta: std::mem::take(&mut estimate.theta),
+        std_err: std::mem::take(&mut estimate.std_err),
+        status: estimate.status,
+        bound_state: std::mem::take(&mut estimate.bound_state),
+        invalid: None,
+        iterations: estimate.iterations,
+        seconds: clock.elapsed().as_secs_f64(),
+    };
+    Ok((report, estimate))
 }

@@ -1,14 +1,17 @@
 //! # An example wheelid plugin: a TurtleBot3 Burger and a friction model
 //!
-//! A **plugin** is a shared library that adds robots, models and solvers to a wheelid binary
-//! that knows nothing of them, at run time. This crate adds two:
+//! A **plugin** is a shared library that adds robots, models, solvers and estimators to a
+//! wheelid binary that knows nothing of them, at run time. This crate adds three:
 //!
 //! * the robot `turtlebot3` ([`robot`]): a simulated ROBOTIS TurtleBot3 Burger — a robot
 //!   wheelid does not ship — with its physical data and the documented choices behind its
 //!   parameters in [`burger`];
 //! * the model `vw-pd-coulomb` ([`model`]): Laut 2011 eq. 2.19 plus a dry (Coulomb) friction
 //!   per channel, eight parameters, linear in them, so that wheelid's least-squares
-//!   estimators fit it like its own models.
+//!   estimators fit it like its own models;
+//! * the estimator `huber` ([`huber`]): Huber's robust regression on the filtered regression,
+//!   with block-jackknife standard errors — `wheelid identify --plugin … --estimator huber`,
+//!   or beside the built-in ones with `--compare`.
 //!
 //! It depends on `wheelid-core` alone (and nalgebra, serde, toml): its integrator, its random
 //! numbers and its physics are its own, as any third party's would be.
@@ -25,6 +28,7 @@
 //! pub fn register(r: &mut Registrar) {
 //!     r.robot("turtlebot3", make_robot);      // fn(&str) -> Result<Box<dyn Robot>, String>
 //!     r.model("vw-pd-coulomb", make_model);   // fn(&str) -> Result<Box<dyn RegressorModel>, String>
+//!     r.estimator("huber", make_huber);       // fn(&str) -> Result<Box<dyn Estimator>, String>
 //! }
 //! wheelid_core::export_plugin!(register);
 //! ```
@@ -95,12 +99,14 @@
 use wheelid_core::plugin::Registrar;
 #[cfg(any(feature = "fault-api-version", feature = "fault-rustc-version"))]
 use wheelid_core::plugin::{CORE_VERSION, PluginDeclaration};
-use wheelid_core::{RegressorModel, Robot};
+use wheelid_core::{Estimator, RegressorModel, Robot};
 
 pub mod burger;
+pub mod huber;
 pub mod model;
 pub mod robot;
 
+pub use huber::Huber;
 pub use model::VwPdCoulomb;
 pub use robot::{TurtleBot, TurtleBotSettings};
 
@@ -115,7 +121,7 @@ const _: () = assert!(
     "wheelid-turtlebot-plugin: enable at most one fault-* feature"
 );
 
-/// Registers the robot `turtlebot3` and the model `vw-pd-coulomb` (with
+/// Registers the robot `turtlebot3`, the model `vw-pd-coulomb` and the estimator `huber` (with
 /// `fault-panic-in-register`: panics instead).
 pub fn register(r: &mut Registrar) {
     if cfg!(feature = "fault-panic-in-register") {
@@ -123,6 +129,15 @@ pub fn register(r: &mut Registrar) {
     }
     r.robot(TurtleBot::NAME, make_robot);
     r.model(VwPdCoulomb::NAME, make_model);
+    r.estimator(Huber::NAME, make_huber);
+}
+
+/// The `huber` factory: [`Huber`] (it has no settings).
+///
+/// # Errors
+/// None; the signature is the registrar's.
+pub fn make_huber(_toml: &str) -> Result<Box<dyn Estimator>, String> {
+    Ok(Box::new(Huber))
 }
 
 /// The `turtlebot3` factory: a [`TurtleBot`] from its `[robot]` table as TOML text (with
