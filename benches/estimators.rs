@@ -59,7 +59,7 @@ fn bench_estimators(c: &mut Criterion) {
         });
         if robot.name == "khepera3" {
             let settings = ConditionSettings::default();
-            let c: Conditioned =
+            let c: Conditioned<'_> =
                 condition::condition(&rec, None, cutoff, &settings).expect("conditions");
             let lags = (1.0 / (c.dt * cutoff)).ceil() as usize;
             group.bench_function("iv khepera3 10 min at 50 Hz", |b| {

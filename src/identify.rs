@@ -411,7 +411,7 @@ fn check_settings(
 /// θ3, θ5 corrections vanish on straight or pure-turn segments, which is the thesis's setting.
 /// Segments need ≥ 1 s of settled data and |v| ≥ 0.05 m/s (|ω| ≥ 0.05 rad/s).
 fn steady_state(
-    data: &[Conditioned],
+    data: &[Conditioned<'_>],
     theta: &[f64],
 ) -> (Option<SteadyStateEstimate>, Option<SteadyStateEstimate>) {
     // A time constant that is not finite (θ4 or θ6 at 0) or longer than a minute leaves no

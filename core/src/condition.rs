@@ -73,14 +73,16 @@ pub enum CutoffChoice {
     },
 }
 
-/// A recording made ready for regression: uniform, aligned, with its filter.
+/// A recording made ready for regression: uniform, aligned, with its filter. It borrows the
+/// recording when that was uniform already (no copy of a long run), and owns the resampled one
+/// otherwise.
 #[derive(Debug, Clone)]
-pub struct Conditioned {
+pub struct Conditioned<'a> {
     /// Where the data came from.
     pub source: PathBuf,
     /// The uniform recording as used (resampled if it was not uniform): the free-run simulation
     /// is driven by its commands and compared with its measurements.
-    pub recording: Recording,
+    pub recording: Cow<'a, Recording>,
     /// Sample period Δt [s].
     pub dt: f64,
     /// Median period before resampling [s], if the recording had to be resampled.
@@ -100,7 +102,7 @@ pub struct Conditioned {
     edge_periods: f64,
 }
 
-impl Conditioned {
+impl Conditioned<'_> {
     /// Number of samples n.
     pub fn len(&self) -> usize {
         self.v.len()
@@ -293,12 +295,26 @@ pub fn suggest_cutoff(recs: &[&Recording]) -> Result<(f64, CutoffChoice)> {
 /// # Errors
 /// [`Error::InvalidSetting`] for a bad filter; [`Error::TooShort`] (naming the file) if the
 /// recording has fewer than [`min_samples`] samples.
-pub fn condition(
-    rec: &Recording,
+pub fn condition<'a>(
+    rec: &'a Recording,
     resampled_from: Option<f64>,
     cutoff_hz: f64,
     settings: &ConditionSettings,
-) -> Result<Conditioned> {
+) -> Result<Conditioned<'a>> {
+    condition_cow(Cow::Borrowed(rec), resampled_from, cutoff_hz, settings)
+}
+
+/// [`condition`] of a recording borrowed or owned: an owned one (resampled, restamped) moves
+/// into the result instead of being copied.
+///
+/// # Errors
+/// As [`condition`].
+pub fn condition_cow<'a>(
+    rec: Cow<'a, Recording>,
+    resampled_from: Option<f64>,
+    cutoff_hz: f64,
+    settings: &ConditionSettings,
+) -> Result<Conditioned<'a>> {
     let s = rec.sampling();
     if !s.uniform {
         return Err(Error::InvalidSetting(format!(
@@ -362,7 +378,7 @@ pub fn condition(
         w_ref: align_cmd(&rec.w_ref),
         v: align_meas(&rec.v),
         w: align_meas(&rec.w),
-        recording: rec.clone(),
+        recording: rec,
         filter,
         sos,
         stencil: settings.stencil,

@@ -32,7 +32,7 @@ pub struct EstimatorInput<'a> {
     pub recordings: &'a [Recording],
     /// The same recordings resampled, aligned and filtered (`crate::condition`), one each:
     /// what a regression-based estimator fits.
-    pub conditioned: &'a [Conditioned],
+    pub conditioned: &'a [Conditioned<'a>],
     /// Least squares' θ (eq. 4.3–4.7), length p: the start.
     pub start: &'a [f64],
     /// Bounds (lower, upper) on θ, length p, when the run has them.

@@ -193,5 +193,5 @@ pub trait RegressorModel: DynamicModel {
     ///
     /// # Errors
     /// Conditioning errors (recording too short for the filter).
-    fn regression(&self, data: &Conditioned) -> Result<Vec<ChannelRegression>>;
+    fn regression(&self, data: &Conditioned<'_>) -> Result<Vec<ChannelRegression>>;
 }

@@ -424,7 +424,7 @@ impl DynamicModel for PanicGuard<dyn RegressorModel> {
 }
 
 impl RegressorModel for PanicGuard<dyn RegressorModel> {
-    fn regression(&self, data: &Conditioned) -> Result<Vec<ChannelRegression>> {
+    fn regression(&self, data: &Conditioned<'_>) -> Result<Vec<ChannelRegression>> {
         guarded(|| self.inner.regression(data)).map_err(Error::InvalidSetting)?
     }
 }
@@ -590,7 +590,7 @@ mod tests {
         }
     }
     impl RegressorModel for Empty {
-        fn regression(&self, _: &Conditioned) -> Result<Vec<ChannelRegression>> {
+        fn regression(&self, _: &Conditioned<'_>) -> Result<Vec<ChannelRegression>> {
             Ok(Vec::new())
         }
     }

@@ -87,7 +87,7 @@ macro_rules! six_theta_model {
         }
 
         impl RegressorModel for $ty {
-            fn regression(&self, data: &Conditioned) -> Result<Vec<ChannelRegression>> {
+            fn regression(&self, data: &Conditioned<'_>) -> Result<Vec<ChannelRegression>> {
                 regressor::regression(data)
             }
         }

@@ -65,7 +65,7 @@ pub const CHANNELS: [ChannelInfo; 2] = [
 ///
 /// # Errors
 /// [`wheelid_core::Error::TooShort`] if the recording is shorter than the filter padding.
-pub fn regression(data: &Conditioned) -> Result<Vec<ChannelRegression>> {
+pub fn regression(data: &Conditioned<'_>) -> Result<Vec<ChannelRegression>> {
     let keep = data.valid_range();
     let n = keep.len();
     let w2: Vec<f64> = data.w.iter().map(|w| -w * w).collect();

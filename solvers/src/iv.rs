@@ -87,7 +87,7 @@ impl InstrumentalVariables {
     pub fn fit<M: RegressorModel + ?Sized>(
         &self,
         model: &M,
-        data: &[Conditioned],
+        data: &[Conditioned<'_>],
         theta0: &[f64],
         cutoff_hz: f64,
         settings: &ConditionSettings,
@@ -134,7 +134,7 @@ impl InstrumentalVariables {
             let mut inst_files = Vec::with_capacity(data.len());
             for (c, x0) in data.iter().zip(&initial) {
                 let sim = model.simulate(&theta, &c.recording, x0).map_err(invalid)?;
-                let mut rec = c.recording.clone();
+                let mut rec = c.recording.clone().into_owned();
                 let (Some(v), Some(w)) = (sim.first(), sim.get(1)) else {
                     return Err(SolveError::InvalidProblem(
                         "IV needs a model with (v, ω) outputs".into(),

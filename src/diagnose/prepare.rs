@@ -329,7 +329,7 @@ struct NoiseFloor {
 }
 
 impl NoiseFloor {
-    fn add(&mut self, c: &wheelid_core::Conditioned) {
+    fn add(&mut self, c: &wheelid_core::Conditioned<'_>) {
         let (Ok(sv), Ok(sw)) = (c.smooth(&c.v), c.smooth(&c.w)) else {
             return;
         };

@@ -13,7 +13,7 @@ pub(super) struct Prepared<'a> {
     /// what output error fits and the validation simulates.
     pub restamped: Cow<'a, [Recording]>,
     /// Resampled, aligned and filtered (`wheelid_core::condition`), one per recording.
-    pub conditioned: Vec<Conditioned>,
+    pub conditioned: Vec<Conditioned<'a>>,
     /// The run's cut-off [Hz] and how it was chosen.
     pub cutoff_hz: f64,
     pub cutoff_choice: CutoffChoice,
@@ -24,7 +24,8 @@ pub(super) struct Prepared<'a> {
 
 /// Conditions `recordings` for the run: restamp, resample onto a uniform grid, choose one
 /// cut-off (the documented rule unless `settings` gives one), filter and differentiate. Copies
-/// only where a recording changes, so a 1e6-row run holds its columns once.
+/// only where a recording changes (restamped, resampled), so a 1e6-row run holds its columns
+/// once: the conditioned recordings borrow the caller's.
 ///
 /// # Errors
 /// [`IdentifyError::Core`] for a recording too short or too irregular to condition.
@@ -45,24 +46,28 @@ pub(super) fn prepare<'a>(
     } else {
         Cow::Borrowed(recordings)
     };
-    let conditioned = {
-        let uniform: Vec<(Cow<'_, Recording>, Option<f64>)> = restamped
+    // Uniform recordings: the caller's, borrowed, unless restamping or resampling made new
+    // ones (restamped ones stay in `restamped` for output error, so they are copied here).
+    let uniform: Vec<(Cow<'a, Recording>, Option<f64>)> = match &restamped {
+        Cow::Borrowed(recs) => recs
             .iter()
             .map(condition::make_uniform)
-            .collect::<Result<_, _>>()?;
-        let (cutoff_hz, cutoff_choice) = match settings.condition.cutoff_hz {
-            Some(fc) => (fc, CutoffChoice::Given),
-            None => condition::suggest_cutoff(
-                &uniform.iter().map(|(r, _)| r.as_ref()).collect::<Vec<_>>(),
-            )?,
-        };
-        let conditioned: Vec<Conditioned> = uniform
+            .collect::<Result<_, _>>()?,
+        Cow::Owned(recs) => recs
             .iter()
-            .map(|(r, from)| condition::condition(r, *from, cutoff_hz, &settings.condition))
-            .collect::<Result<_, _>>()?;
-        (conditioned, cutoff_hz, cutoff_choice)
+            .map(|r| condition::make_uniform(r).map(|(u, f)| (Cow::Owned(u.into_owned()), f)))
+            .collect::<Result<_, _>>()?,
     };
-    let (conditioned, cutoff_hz, cutoff_choice) = conditioned;
+    let (cutoff_hz, cutoff_choice) = match settings.condition.cutoff_hz {
+        Some(fc) => (fc, CutoffChoice::Given),
+        None => {
+            condition::suggest_cutoff(&uniform.iter().map(|(r, _)| r.as_ref()).collect::<Vec<_>>())?
+        }
+    };
+    let conditioned: Vec<Conditioned<'a>> = uniform
+        .into_iter()
+        .map(|(r, from)| condition::condition_cow(r, from, cutoff_hz, &settings.condition))
+        .collect::<Result<_, _>>()?;
     // Residuals of filtered data are correlated over about one filter time constant.
     let lags = conditioned
         .iter()

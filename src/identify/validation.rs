@@ -25,7 +25,7 @@ pub(super) struct Validation {
 pub(super) fn validate(
     model: &dyn RegressorModel,
     theta: &[f64],
-    conditioned: &[Conditioned],
+    conditioned: &[Conditioned<'_>],
     recordings: &[Recording],
     initial: Vec<Option<Vec<f64>>>,
     offset: Option<f64>,

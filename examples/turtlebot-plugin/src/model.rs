@@ -221,7 +221,7 @@ pub fn simulate(theta: &[f64], rec: &Recording, initial: &[f64]) -> Result<[Vec<
 ///
 /// # Errors
 /// [`Error::TooShort`] if the recording is shorter than the filter padding.
-pub fn regression(data: &Conditioned) -> Result<Vec<ChannelRegression>> {
+pub fn regression(data: &Conditioned<'_>) -> Result<Vec<ChannelRegression>> {
     let keep = data.valid_range();
     let n = keep.len();
     let vf = data.smooth(&data.v)?;
@@ -281,7 +281,7 @@ impl DynamicModel for VwPdCoulomb {
 }
 
 impl RegressorModel for VwPdCoulomb {
-    fn regression(&self, data: &Conditioned) -> Result<Vec<ChannelRegression>> {
+    fn regression(&self, data: &Conditioned<'_>) -> Result<Vec<ChannelRegression>> {
         regression(data)
     }
 }
