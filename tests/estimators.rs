@@ -343,3 +343,50 @@ fn output_error_hands_back_its_jacobian_at_the_optimum() {
         }
     }
 }
+
+#[test]
+fn a_long_fit_started_from_its_head_ends_where_the_cold_fit_ends() {
+    // 2,400 s of the Khepera III at 50 Hz (120,001 samples, four times a 30,000-sample head): output error first fits the head and starts the full fit
+    // from there. The answer is the full fit's — the same θ̂ and errors as a fit started cold
+    // from least squares, to far inside its tolerance — and both hold the true θ.
+    let robot = RobotProfile::khepera3();
+    let rec = recording(&robot, 11, 2400.0);
+    assert!(rec.len() >= 120_000, "{} samples", rec.len());
+    let ls = IdentifySettings {
+        estimator: "ls".into(),
+        ..IdentifySettings::default()
+    };
+    let start = identify(std::slice::from_ref(&rec), &VwPd, &Ols::default(), &ls)
+        .expect("ls")
+        .theta;
+    let fit = |warm_start| {
+        OutputError {
+            warm_start,
+            ..OutputError::default()
+        }
+        .fit(&VwPd, std::slice::from_ref(&rec), &start)
+        .expect("fits")
+    };
+    let (cold, warm) = (fit(None), fit(Some(30_000)));
+    eprintln!(
+        "cold: {} evaluations, {:.2} s; warm: {} evaluations (head's included), {:.2} s",
+        cold.evaluations, cold.seconds, warm.evaluations, warm.seconds
+    );
+    for i in 0..6 {
+        let scale = cold.std_err[i];
+        assert!(
+            (warm.theta[i] - cold.theta[i]).abs() < 1e-3 * scale,
+            "θ{}: warm {} vs cold {} (σ {scale})",
+            i + 1,
+            warm.theta[i],
+            cold.theta[i]
+        );
+        assert!(
+            (warm.std_err[i] / cold.std_err[i] - 1.0).abs() < 1e-4,
+            "σ{}",
+            i + 1
+        );
+    }
+    let err = errors(&warm.theta, &robot.theta, &rec);
+    assert!(err.iter().all(|&e| e < 0.01), "errors {err:?}");
+}

@@ -198,6 +198,28 @@ impl Recording {
         self.t.is_empty()
     }
 
+    /// The first `n` samples (all of them when `n ≥ len`), with the same source and metadata:
+    /// the head of a long drive, e.g. for a quick fit to start a long one from.
+    pub fn head(&self, n: usize) -> Self {
+        let n = n.min(self.len());
+        let cut = |c: &[f64]| c[..n].to_vec();
+        let cut_opt = |c: &Option<Vec<f64>>| c.as_deref().map(cut);
+        Self {
+            source: self.source.clone(),
+            meta: self.meta.clone(),
+            t: cut(&self.t),
+            v_ref: cut(&self.v_ref),
+            w_ref: cut(&self.w_ref),
+            v: cut(&self.v),
+            w: cut(&self.w),
+            x: cut_opt(&self.x),
+            y: cut_opt(&self.y),
+            phi: cut_opt(&self.phi),
+            wl: cut_opt(&self.wl),
+            wr: cut_opt(&self.wr),
+        }
+    }
+
     /// Duration t[n−1] − t[0] [s] (0 for fewer than two samples).
     pub fn duration(&self) -> f64 {
         match (self.t.first(), self.t.last()) {

@@ -31,6 +31,14 @@
 //! weights give a consistent θ̂; these make it efficient when the channels' noise levels
 //! differ.
 //!
+//! **Long recordings.** From [`WARM_START_FACTOR`] × [`OutputError::warm_start`] samples on (a
+//! 1e6-sample drive), the same fit is first run on the recordings' heads — their first
+//! `warm_start` ([`WARM_START_SAMPLES`]) samples in all, shared in proportion to their lengths, the same
+//! bounds and weighting — and the full fit starts from that θ̂, so that its own iterations,
+//! each a simulation with sensitivities of every sample, are the few that move a nearly
+//! converged θ (the answer is the full fit's, to its tolerance, whatever the start). A head
+//! fit that fails leaves the start as given.
+//!
 //! **Uncertainty.** At θ̂ the weighted Jacobian J (rows time-major: sample k, then channel c)
 //! and the weighted residuals e give the sandwich covariance
 //!
@@ -80,6 +88,9 @@ pub struct OutputError {
     /// simulation per column instead of two, truncation error O(h) instead of O(h²) (h ~ 1e-5
     /// relative). Off by default.
     pub forward_differences: bool,
+    /// Samples of the head problem a long fit starts from (module doc, *Long recordings*);
+    /// `None`: always start from the θ given. Default [`WARM_START_SAMPLES`].
+    pub warm_start: Option<usize>,
 }
 
 impl Default for OutputError {
@@ -92,6 +103,7 @@ impl Default for OutputError {
             correlation_lags: None,
             mask: None,
             forward_differences: false,
+            warm_start: Some(WARM_START_SAMPLES),
         }
     }
 }
@@ -234,6 +246,14 @@ type FdColumn = (usize, f64, Vec<Vec<f64>>, Vec<Vec<f64>>);
 
 /// Most minimisations: a second (third) one only if the noise weights moved.
 const MAX_PASSES: usize = 3;
+
+/// Samples (over all recordings) of the head problem a long fit starts from (module doc,
+/// *Long recordings*).
+pub const WARM_START_SAMPLES: usize = 50_000;
+
+/// A problem is long, and starts from its heads' fit, from this many times
+/// [`WARM_START_SAMPLES`] samples.
+pub const WARM_START_FACTOR: usize = 4;
 /// Relative change of a weight ratio σ_1/σ_c that calls for another pass.
 const WEIGHT_TOLERANCE: f64 = 0.1;
 
@@ -482,12 +502,55 @@ impl OutputError {
         theta0: &[f64],
     ) -> Result<OutputErrorFit, SolveError> {
         let clock = Instant::now();
-        let problem = self.problem(model, recordings, theta0)?;
+        let (start, warm_evaluations) = match self.warm_start(model, recordings, theta0) {
+            Some((theta, evaluations)) => (theta, evaluations),
+            None => (theta0.to_vec(), 0),
+        };
+        let problem = self.problem(model, recordings, &start)?;
         let (problem, raw, evaluations, termination) = self.minimise(problem)?;
         let mut fit = self.uncertainty(problem, &raw, termination)?;
-        fit.evaluations = evaluations;
+        fit.evaluations = warm_evaluations + evaluations;
         fit.seconds = clock.elapsed().as_secs_f64();
         Ok(fit)
+    }
+
+    /// A start for a long problem (module doc, *Long recordings*): θ̂ of the same fit on the
+    /// recordings' heads, about [`OutputError::warm_start`] samples in all, with the residual
+    /// evaluations it used (a mask is cut with its recordings); `None` for a short problem, or
+    /// when the head's fit fails (the full fit then starts from `theta0` as it would have).
+    fn warm_start<M: DynamicModel + ?Sized>(
+        &self,
+        model: &M,
+        recordings: &[Recording],
+        theta0: &[f64],
+    ) -> Option<(Vec<f64>, usize)> {
+        let head = self.warm_start?;
+        let total: usize = recordings.iter().map(Recording::len).sum();
+        if total < WARM_START_FACTOR * head {
+            return None;
+        }
+        let lengths: Vec<usize> = recordings
+            .iter()
+            .map(|r| (head * r.len()).div_ceil(total))
+            .collect();
+        let heads: Vec<Recording> = recordings
+            .iter()
+            .zip(&lengths)
+            .map(|(r, &n)| r.head(n))
+            .collect();
+        let head_fit = OutputError {
+            warm_start: None,
+            mask: self.mask.as_ref().map(|m| {
+                m.iter()
+                    .zip(&lengths)
+                    .map(|(m, &n)| m[..n.min(m.len())].to_vec())
+                    .collect()
+            }),
+            ..self.clone()
+        };
+        let problem = head_fit.problem(model, &heads, theta0).ok()?;
+        let (problem, _, evaluations, _) = head_fit.minimise(problem).ok()?;
+        Some((problem.theta_of(&problem.u), evaluations))
     }
 
     /// Checks the inputs of [`OutputError::fit`] and sets up its problem at `theta0`.
