@@ -185,6 +185,12 @@ fn build_plugin(feature: Option<&str>, dir: &Path) -> PathBuf {
     copy
 }
 
+/// The example plugin built without faults, one build at a time ([`BUILD`]), copied under `dir`.
+fn good_plugin(dir: &Path) -> PathBuf {
+    let _one = BUILD.lock().unwrap_or_else(|e| e.into_inner());
+    build_plugin(None, dir)
+}
+
 /// The example plugin config with its `plugins` line pointing at `lib`, written under `dir`.
 fn plugin_config(lib: &Path, dir: &Path) -> PathBuf {
     let text = std::fs::read_to_string(config("run_plugin.toml")).expect("example config");
@@ -250,10 +256,7 @@ fn a_plugin_model_is_identified_and_diagnosed_from_the_command_line() {
     // The plugin's robot drives (as `wheelid run` does), then its model is identified and
     // diagnosed by `identify --plugin` and `diagnose --plugin`, which load the same library.
     let dir = tempfile::tempdir().expect("tempdir");
-    let lib = {
-        let _one = BUILD.lock().unwrap_or_else(|e| e.into_inner());
-        build_plugin(None, dir.path())
-    };
+    let lib = good_plugin(dir.path());
     let out = run(&plugin_config(&lib, dir.path()), false).expect("runs");
     let csv = dir.path().join("burger.csv");
     out.recording.write_csv(&csv).expect("writes");
@@ -314,10 +317,7 @@ fn a_plugin_estimator_is_chosen_by_name_compared_and_resists_spikes() {
     // ω (±0.05 m/s, ±0.5 rad/s), its θ̂ holds the true θ within 3 of its σ and its θ5 interval
     // is at least twice as narrow as least squares' (measured σ 0.0096 vs 0.0247).
     let dir = tempfile::tempdir().expect("tempdir");
-    let lib = {
-        let _one = BUILD.lock().unwrap_or_else(|e| e.into_inner());
-        build_plugin(None, dir.path())
-    };
+    let lib = good_plugin(dir.path());
     let csv = dir.path().join("spiky.csv");
     let bin = env!("CARGO_BIN_EXE_wheelid");
     let o = Command::new(bin)
@@ -402,10 +402,7 @@ fn a_plugin_estimator_is_chosen_by_name_compared_and_resists_spikes() {
 #[test]
 fn the_example_plugin_adds_a_robot_and_a_model_that_identify() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let lib = {
-        let _one = BUILD.lock().unwrap_or_else(|e| e.into_inner());
-        build_plugin(None, dir.path())
-    };
+    let lib = good_plugin(dir.path());
     let out = run(&plugin_config(&lib, dir.path()), false).expect("runs");
     let id = &out.identification;
     assert_eq!(id.model, "vw-pd-coulomb");
