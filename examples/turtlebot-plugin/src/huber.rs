@@ -117,8 +117,9 @@ fn irls(
             .map(|&i| y[i] - (x.row(i) * &theta)[0])
             .collect();
         let mut abs: Vec<f64> = r.iter().map(|v| v.abs()).collect();
-        abs.sort_by(f64::total_cmp);
-        let s = abs[abs.len() / 2] / 0.6745;
+        let mid = abs.len() / 2;
+        let (_, median, _) = abs.select_nth_unstable_by(mid, f64::total_cmp);
+        let s = *median / 0.6745;
         if !(s.is_finite() && s > 0.0) {
             return Ok((theta.as_slice().to_vec(), true));
         }
