@@ -53,6 +53,8 @@
 use nalgebra::DMatrix;
 use wheelid_core::{CommandHold, Error, Recording, Result, Sensitivities, VelocitySampling};
 
+mod speculative;
+
 /// Longest integration sub-step [s].
 pub const MAX_SUBSTEP: f64 = 0.02;
 /// Shortest integration sub-step [s]: time constants below a millisecond are not a robot's;
@@ -475,44 +477,87 @@ fn setup(theta: &[f64], rec: &Recording, initial: &[f64]) -> Result<Setup> {
 /// # Errors
 /// [`Error::InvalidSetting`] for a bad θ or initial state, or an empty recording.
 pub fn simulate(theta: &[f64], rec: &Recording, initial: &[f64]) -> Result<[Vec<f64>; 2]> {
-    let Setup {
-        th,
-        v0,
-        w0,
-        n,
-        hold,
-        avg,
-    } = setup(theta, rec, initial)?;
-    let mut v_out = Vec::with_capacity(n);
-    let mut w_out = Vec::with_capacity(n);
-    let [t1, t2, t3, t4, t5, t6] = th;
-    let (i1, i2) = (1.0 / t1, 1.0 / t2);
-    // eq. 2.19 as `accel`, multiplying by 1/θ1, 1/θ2 (the step's critical path).
-    let f = |x: &[f64; 2], u: (f64, f64)| {
-        let [v, w] = *x;
-        [
-            (t3 * w * w - t4 * v + u.0) * i1,
-            (-t5 * v * w - t6 * w + u.1) * i2,
-        ]
+    let setup = setup(theta, rec, initial)?;
+    let parts = if setup.n < speculative::MIN_SAMPLES {
+        1
+    } else {
+        rayon::current_num_threads().clamp(1, speculative::MAX_PARTS)
     };
-    let mut x = [v0, w0];
-    v_out.push(v0);
-    w_out.push(w0);
-    for k in 1..n {
-        let mut q = [0.0; 2];
-        let span = for_each_substep(rec, k, hold, &th, |u0, u1, h, exponential| {
-            if exponential {
-                let lin = [-t4 * i1, -(t5 * x[0] + t6) * i2];
-                etdrk4_step(f, lin, &mut x, &mut q, u0, u1, h);
-            } else {
-                rk4_step(f, &mut x, &mut q, u0, u1, h);
-            }
-        });
-        let y = if avg { q.map(|i| i / span) } else { x };
-        v_out.push(y[0]);
-        w_out.push(y[1]);
+    Ok(speculative::free_run(&FreeRun::new(&setup, rec), parts))
+}
+
+/// The free run's step from one sample to the next: a pure function of the state at the
+/// previous sample and the recording, which is what lets [`speculative::free_run`] integrate
+/// parts of a long recording at once.
+pub(crate) struct FreeRun<'a> {
+    rec: &'a Recording,
+    th: [f64; 6],
+    inv: [f64; 2],
+    hold: CommandHold,
+    avg: bool,
+    initial: [f64; 2],
+}
+
+impl<'a> FreeRun<'a> {
+    fn new(setup: &Setup, rec: &'a Recording) -> Self {
+        let th = setup.th;
+        Self {
+            rec,
+            th,
+            inv: [1.0 / th[0], 1.0 / th[1]],
+            hold: setup.hold,
+            avg: setup.avg,
+            initial: [setup.v0, setup.w0],
+        }
     }
-    Ok([v_out, w_out])
+
+    /// Samples in the recording.
+    pub(crate) fn len(&self) -> usize {
+        self.rec.len()
+    }
+
+    /// The initial state (v0, ω0): output sample 0.
+    pub(crate) fn initial(&self) -> [f64; 2] {
+        self.initial
+    }
+
+    /// A guess of the state at sample `k` (the measured velocities, zero where not finite),
+    /// for a part that starts there without the exact state.
+    pub(crate) fn guess(&self, k: usize) -> [f64; 2] {
+        [self.rec.v[k], self.rec.w[k]].map(|x| if x.is_finite() { x } else { 0.0 })
+    }
+
+    /// Advances the state `x` from t_{k−1} to t_k (k ≥ 1) and returns output sample k: the
+    /// state, or its window average when the recording samples so.
+    #[inline]
+    pub(crate) fn step(&self, k: usize, x: &mut [f64; 2]) -> [f64; 2] {
+        let [_, _, t3, t4, t5, t6] = self.th;
+        let [i1, i2] = self.inv;
+        // eq. 2.19 as `accel`, multiplying by 1/θ1, 1/θ2 (the step's critical path).
+        let f = |x: &[f64; 2], u: (f64, f64)| {
+            let [v, w] = *x;
+            [
+                (t3 * w * w - t4 * v + u.0) * i1,
+                (-t5 * v * w - t6 * w + u.1) * i2,
+            ]
+        };
+        let mut q = [0.0; 2];
+        let span = for_each_substep(
+            self.rec,
+            k,
+            self.hold,
+            &self.th,
+            |u0, u1, h, exponential| {
+                if exponential {
+                    let lin = [-t4 * i1, -(t5 * x[0] + t6) * i2];
+                    etdrk4_step(f, lin, x, &mut q, u0, u1, h);
+                } else {
+                    rk4_step(f, x, &mut q, u0, u1, h);
+                }
+            },
+        );
+        if self.avg { q.map(|i| i / span) } else { *x }
+    }
 }
 
 /// Number of sensitivity columns: θ1…θ6, then v0, ω0.

@@ -79,11 +79,20 @@ pub fn regression(data: &Conditioned<'_>) -> Result<Vec<ChannelRegression>> {
     let dw = data.differentiate(&wf)?;
     // Each channel's signals are dropped once its rows are built (a 1e6-row run holds one
     // channel's filtered signals less at its peak).
-    let channel = |i: usize, cols: [Vec<f64>; 3], y: Vec<f64>| ChannelRegression {
-        channel: CHANNELS[i].name,
-        params: CHANNELS[i].params.to_vec(),
-        x: DMatrix::from_fn(n, 3, |r, j| cols[j][keep.start + r]),
-        y: DVector::from_column_slice(&y[keep.clone()]),
+    // X is column-major: its columns' kept rows end to end; y is kept in place.
+    let channel = |i: usize, cols: [Vec<f64>; 3], mut y: Vec<f64>| {
+        let mut x = Vec::with_capacity(3 * n);
+        for c in cols {
+            x.extend_from_slice(&c[keep.clone()]);
+        }
+        y.truncate(keep.end);
+        y.drain(..keep.start);
+        ChannelRegression {
+            channel: CHANNELS[i].name,
+            params: CHANNELS[i].params.to_vec(),
+            x: DMatrix::from_vec(n, 3, x),
+            y: DVector::from_vec(y),
+        }
     };
     let v = channel(0, [dv, w2f, vf], yv);
     Ok(vec![v, channel(1, [dw, vwf, wf], yw)])

@@ -113,7 +113,7 @@ impl InstrumentalVariables {
         let regressions = ChannelRegression::stack(per_file);
         let initial: Vec<Vec<f64>> = data
             .iter()
-            .map(|c| Ok(c.smooth_all(&[&c.v, &c.w])?.iter().map(|x| x[0]).collect()))
+            .map(|c| Ok(c.initial_state()?.to_vec()))
             .collect::<Result<_, wheelid_core::Error>>()
             .map_err(invalid)?;
         if regressions

@@ -2,7 +2,7 @@
 
 use std::borrow::Cow;
 
-use wheelid_core::condition::{self, CutoffChoice};
+use wheelid_core::condition::{self, CutoffChoice, Uniform};
 use wheelid_core::{Conditioned, Recording, Timing};
 
 use super::{IdentifyError, IdentifySettings};
@@ -48,25 +48,28 @@ pub(super) fn prepare<'a>(
     };
     // Uniform recordings: the caller's, borrowed, unless restamping or resampling made new
     // ones (restamped ones stay in `restamped` for output error, so they are copied here).
-    let uniform: Vec<(Cow<'a, Recording>, Option<f64>)> = match &restamped {
+    let uniform: Vec<Uniform<'a>> = match &restamped {
         Cow::Borrowed(recs) => recs
             .iter()
-            .map(condition::make_uniform)
+            .map(condition::uniform)
             .collect::<Result<_, _>>()?,
         Cow::Owned(recs) => recs
             .iter()
-            .map(|r| condition::make_uniform(r).map(|(u, f)| (Cow::Owned(u.into_owned()), f)))
+            .map(|r| {
+                condition::uniform(r).map(|u| Uniform {
+                    recording: Cow::Owned(u.recording.into_owned()),
+                    ..u
+                })
+            })
             .collect::<Result<_, _>>()?,
     };
     let (cutoff_hz, cutoff_choice) = match settings.condition.cutoff_hz {
         Some(fc) => (fc, CutoffChoice::Given),
-        None => {
-            condition::suggest_cutoff(&uniform.iter().map(|(r, _)| r.as_ref()).collect::<Vec<_>>())?
-        }
+        None => condition::suggest_cutoff_uniform(&uniform)?,
     };
     let conditioned: Vec<Conditioned<'a>> = uniform
         .into_iter()
-        .map(|(r, from)| condition::condition_cow(r, from, cutoff_hz, &settings.condition))
+        .map(|u| condition::condition_uniform(u, cutoff_hz, &settings.condition))
         .collect::<Result<_, _>>()?;
     // Residuals of filtered data are correlated over about one filter time constant.
     let lags = conditioned

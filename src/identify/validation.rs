@@ -43,7 +43,7 @@ pub(super) fn validate(
         let x0_estimated = x0.is_some();
         let initial = match x0 {
             Some(x) => x,
-            None => c.smooth_all(&[&c.v, &c.w])?.iter().map(|x| x[0]).collect(),
+            None => c.initial_state()?.to_vec(),
         };
         let simulated = match offset {
             Some(d) => {
