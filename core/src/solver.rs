@@ -103,8 +103,9 @@ pub enum SolveError {
     InvalidProblem(String),
 }
 
-/// A least-squares solver.
-pub trait Solver {
+/// A least-squares solver. `Send + Sync`: a run solves its channels' problems at once, on
+/// the available cores.
+pub trait Solver: Send + Sync {
     /// Solver name as used on the command line, e.g. `ols`.
     fn name(&self) -> &str;
 

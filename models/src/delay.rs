@@ -219,7 +219,7 @@ impl DynamicModel for InputDelay {
                 }
             }
         }
-        Ok(out.to_vec())
+        Ok(Vec::from(out))
     }
 }
 

@@ -73,7 +73,7 @@ macro_rules! six_theta_model {
                 &regressor::CHANNELS
             }
             fn simulate(&self, theta: &[f64], rec: &Recording, initial: &[f64]) -> Result<Simulation> {
-                Ok(dynamics::simulate(theta, rec, initial)?.to_vec())
+                Ok(Vec::from(dynamics::simulate(theta, rec, initial)?))
             }
             fn simulate_with_sensitivities(
                 &self,
@@ -82,7 +82,7 @@ macro_rules! six_theta_model {
                 initial: &[f64],
             ) -> Result<Option<(Simulation, Sensitivities)>> {
                 let (y, s) = dynamics::simulate_with_sensitivities(theta, rec, initial)?;
-                Ok(Some((y.to_vec(), s)))
+                Ok(Some((Vec::from(y), s)))
             }
         }
 

@@ -415,16 +415,22 @@ impl<M: DynamicModel + ?Sized> Problem<'_, M> {
         for (r, rec) in self.recs.iter().enumerate() {
             let sens = self.sensitivities(&theta, &self.initial_of(u, r), rec, cached[r].take())?;
             let channels = sens.theta.iter().zip(&sens.initial).zip(&self.weight);
+            // Column by column (both matrices are column-major): row offsets[r] + i·s + c of
+            // column j is −w_c ∂ŷ_c(t_k)/∂(θ, x0)_j, k = index[r][i].
             for (c, ((st, si), &w)) in channels.enumerate() {
-                for (i, &k) in self.index[r].iter().enumerate() {
-                    let row = self.offsets[r] + i * s + c;
-                    for j in 0..p {
-                        jac[(row, j)] = -w * st[(k, j)];
+                let mut fill = |col: usize, src: &[f64]| {
+                    let dst = &mut jac.column_mut(col);
+                    for (i, &k) in self.index[r].iter().enumerate() {
+                        dst[self.offsets[r] + i * s + c] = -w * src[k];
                     }
-                    if self.fixed_initial.is_none() {
-                        for i in 0..s {
-                            jac[(row, p + r * s + i)] = -w * si[(k, i)];
-                        }
+                };
+                let n = st.nrows();
+                for j in 0..p {
+                    fill(j, &st.as_slice()[j * n..(j + 1) * n]);
+                }
+                if self.fixed_initial.is_none() {
+                    for i in 0..s {
+                        fill(p + r * s + i, &si.as_slice()[i * n..(i + 1) * n]);
                     }
                 }
             }
@@ -471,12 +477,13 @@ impl<M: DynamicModel + ?Sized> LeastSquaresProblem<f64, na::Dyn, na::Dyn> for Pr
     fn jacobian(&self) -> Option<na::DMatrix<f64>> {
         let jac = self.jacobian_theta(&self.u)?;
         let p = self.p();
-        let chain: Vec<f64> = (0..p)
-            .map(|j| self.transform[j].dtheta_du(self.u[j]))
-            .collect();
-        let out = na::DMatrix::from_fn(jac.nrows(), jac.ncols(), |i, j| {
-            jac[(i, j)] * chain.get(j).copied().unwrap_or(1.0)
-        });
+        // Chain rule to u: each θ column scaled by dθ/du (the x0 columns are u's own); the
+        // minimiser's nalgebra is another version, whose matrix takes the same column-major
+        // values.
+        let mut out = na::DMatrix::from_column_slice(jac.nrows(), jac.ncols(), jac.as_slice());
+        for (j, mut col) in out.column_iter_mut().enumerate().take(p) {
+            col *= self.transform[j].dtheta_du(self.u[j]);
+        }
         self.last_jacobian.replace(Some((self.u.clone(), jac)));
         Some(out)
     }

@@ -6,7 +6,7 @@
 use std::time::Instant;
 
 use wheelid_core::{
-    BoundState, ChannelRegression, Estimate, Estimator, EstimatorInput, LinearProblem,
+    BoundState, ChannelRegression, Estimate, Estimator, EstimatorInput, LinearFit, LinearProblem,
     RegressorModel, SolveStatus, Solver, metrics,
 };
 
@@ -52,9 +52,9 @@ pub(super) fn least_squares(
     let mut theta = vec![0.0; p];
     let mut std_err = vec![0.0; p];
     let mut bound_state = vec![BoundState::Free; p];
-    let mut quality = Vec::new();
     let clock = Instant::now();
-    for reg in &regressions {
+    // The channels' problems are independent: solved at once, on the available cores.
+    let solve = |reg: &ChannelRegression| -> Result<(LinearFit, (f64, f64, usize)), IdentifyError> {
         let ch_names: Vec<&str> = reg.params.iter().map(|&i| names[i]).collect();
         let ch_bounds: Option<Vec<(f64, f64)>> = settings
             .bounds
@@ -73,17 +73,29 @@ pub(super) fn least_squares(
                 channel: reg.channel.into(),
                 source,
             })?;
+        let yhat = &reg.x * &fit.theta;
+        let quality = (
+            metrics::r_squared(reg.y.as_slice(), yhat.as_slice()),
+            fit.condition_number,
+            reg.y.len(),
+        );
+        Ok((fit, quality))
+    };
+    let fits: Vec<(LinearFit, (f64, f64, usize))> = {
+        use rayon::prelude::*;
+        regressions
+            .par_iter()
+            .map(solve)
+            .collect::<Result<_, _>>()?
+    };
+    let mut quality = Vec::with_capacity(fits.len());
+    for (reg, (fit, q)) in regressions.iter().zip(fits) {
         for (j, &i) in reg.params.iter().enumerate() {
             theta[i] = fit.theta[j];
             std_err[i] = fit.std_err[j];
             bound_state[i] = fit.bound_state[j];
         }
-        let yhat = &reg.x * &fit.theta;
-        quality.push((
-            metrics::r_squared(reg.y.as_slice(), yhat.as_slice()),
-            fit.condition_number,
-            reg.y.len(),
-        ));
+        quality.push(q);
     }
     Ok(LeastSquares {
         report: EstimateReport {
