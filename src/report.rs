@@ -50,8 +50,17 @@ pub fn to_json(id: &Identification, truth: Option<&[f64]>) -> Value {
 
 /// Human-readable report.
 pub fn to_text(id: &Identification, truth: Option<&[f64]>) -> String {
-    use std::fmt::Write;
     let mut s = String::new();
+    text_header(&mut s, id);
+    text_parameters(&mut s, id, truth);
+    text_estimates(&mut s, id);
+    text_quality(&mut s, id);
+    s
+}
+
+/// The run's header: model, estimator, solver, files, filter.
+fn text_header(s: &mut String, id: &Identification) {
+    use std::fmt::Write;
     let _ = writeln!(
         s,
         "model {}  estimator {}  solver {}  samples {}  files {}",
@@ -91,6 +100,11 @@ pub fn to_text(id: &Identification, truth: Option<&[f64]>) -> String {
         id.filter_order, id.cutoff_hz
     );
     let _ = writeln!(s);
+}
+
+/// θ̂ with its standard errors (and the truth, when known).
+fn text_parameters(s: &mut String, id: &Identification, truth: Option<&[f64]>) {
+    use std::fmt::Write;
     let _ = write!(
         s,
         "{:<8} {:>12} {:>12} {:<10}",
@@ -120,6 +134,11 @@ pub fn to_text(id: &Identification, truth: Option<&[f64]>) -> String {
         let _ = writeln!(s);
     }
     let _ = writeln!(s);
+}
+
+/// Every estimator's θ side by side, and the warning when the answer left least squares.
+fn text_estimates(s: &mut String, id: &Identification) {
+    use std::fmt::Write;
     if id.estimates.len() > 1 {
         let _ = write!(s, "{:<8}", "param");
         for e in &id.estimates {
@@ -159,6 +178,11 @@ pub fn to_text(id: &Identification, truth: Option<&[f64]>) -> String {
         );
         let _ = writeln!(s);
     }
+}
+
+/// The timing, the noise, each channel's fit, the steady state and the warnings.
+fn text_quality(s: &mut String, id: &Identification) {
+    use std::fmt::Write;
     if let Some(t) = &id.timing {
         let _ = writeln!(s, "{}", t.summary);
     }
@@ -198,7 +222,6 @@ pub fn to_text(id: &Identification, truth: Option<&[f64]>) -> String {
     for w in &id.warnings {
         let _ = writeln!(s, "\nwarning: {w}");
     }
-    s
 }
 
 /// JSON report of a tracking run:
@@ -279,9 +302,21 @@ pub fn track_text(
 pub fn diagnosis_text(d: &Diagnosis) -> String {
     use std::fmt::Write;
     let mut s = String::new();
-    let fits = |c: &crate::diagnose::Channels| {
-        format!("v {:.1} %, ω {:.1} %", c.v.fit_percent, c.w.fit_percent)
-    };
+    diagnosis_fit_and_test(&mut s, d);
+    let _ = writeln!(s, "   → {}", verdict(d));
+    diagnosis_locate_and_name(&mut s, d);
+    diagnosis_model_and_show(&mut s, d);
+    s
+}
+
+/// The validation fits of both channels, in words.
+fn fits(c: &crate::diagnose::Channels) -> String {
+    format!("v {:.1} %, ω {:.1} %", c.v.fit_percent, c.w.fit_percent)
+}
+
+/// Steps 1 and 2: the nominal fit and the tests on the validation blocks.
+fn diagnosis_fit_and_test(s: &mut String, d: &Diagnosis) {
+    use std::fmt::Write;
     let _ = writeln!(
         s,
         "1. Fit: nominal model (eq. 2.19) by output error on {:.0} s; {:.0} s in {} validation \
@@ -330,6 +365,10 @@ pub fn diagnosis_text(d: &Diagnosis) -> String {
             if t.significant { "SIGNIFICANT" } else { "" }
         );
     }
+}
+
+/// The verdict of step 2 in words: a mismatch or not, and why.
+fn verdict(d: &Diagnosis) -> String {
     let tested = d.tests.iter().any(|t| t.significant);
     let practical = [d.nominal.channels.v, d.nominal.channels.w]
         .iter()
@@ -347,7 +386,7 @@ pub fn diagnosis_text(d: &Diagnosis) -> String {
         })
         .map(|(n, c)| format!("{:.1} × on {n}", c.noise_ratio))
         .collect();
-    let verdict = match (tested, low.is_empty()) {
+    match (tested, low.is_empty()) {
         (true, _) if !d.mismatch && practical => format!(
             "no practical mismatch: evidence survives Holm's correction, but the model explains \
              ≥ {:.0} % of every channel (fits v {:.2} %, ω {:.2} %); the model is kept",
@@ -378,8 +417,12 @@ pub fn diagnosis_text(d: &Diagnosis) -> String {
         (false, true) => {
             "no mismatch: nothing survives Holm's correction; the model is kept as it is".into()
         }
-    };
-    let _ = writeln!(s, "   → {verdict}");
+    }
+}
+
+/// Steps 3 and 4: where the residual lies, and which effects the fingerprints nominate.
+fn diagnosis_locate_and_name(s: &mut String, d: &Diagnosis) {
+    use std::fmt::Write;
     let _ = writeln!(s, "3. Locate (nominal residual):");
     for (c, ch) in d.location.channels.iter().enumerate() {
         let _ = writeln!(
@@ -414,6 +457,11 @@ pub fn diagnosis_text(d: &Diagnosis) -> String {
             }
         );
     }
+}
+
+/// Steps 5 and 6: the effects kept and rejected, and the fit they reach.
+fn diagnosis_model_and_show(s: &mut String, d: &Diagnosis) {
+    use std::fmt::Write;
     let _ = writeln!(s, "5. Model and accept:");
     for f in &d.findings {
         let params: Vec<String> = f
@@ -467,7 +515,6 @@ pub fn diagnosis_text(d: &Diagnosis) -> String {
         let _ = writeln!(s, "   refitted: {}", params.join(", "));
     }
     let _ = writeln!(s, "   ({:.2} s)", d.seconds);
-    s
 }
 
 /// `x ± e` with at least 4 decimals and enough for the standard error's two leading digits
