@@ -226,9 +226,15 @@ pub fn write_track_plots(r: &TrackResult, dir: &Path) -> Result<Vec<PathBuf>> {
     register_font();
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let step = (r.t.len() / MAX_POINTS).max(1);
-    let (t0, t1) = (r.t[0], r.t[r.t.len() - 1]);
-    let mut out = Vec::new();
+    Ok(vec![
+        trajectory_plot(r, dir, step)?,
+        error_plot(r, dir, step)?,
+        theta_plot(r, dir, step)?,
+    ])
+}
 
+/// `trajectory.png`: the desired and actual paths (x, y) [m], every `step`-th point.
+fn trajectory_plot(r: &TrackResult, dir: &Path, step: usize) -> Result<PathBuf> {
     let path = dir.join("trajectory.png");
     {
         let root = BitMapBackend::new(&path, (900, 900)).into_drawing_area();
@@ -266,8 +272,12 @@ pub fn write_track_plots(r: &TrackResult, dir: &Path) -> Result<Vec<PathBuf>> {
             .draw()?;
         root.present()?;
     }
-    out.push(path);
+    Ok(path)
+}
 
+/// `error.png`: the distance error [m] against time [s], every `step`-th point.
+fn error_plot(r: &TrackResult, dir: &Path, step: usize) -> Result<PathBuf> {
+    let (t0, t1) = (r.t[0], r.t[r.t.len() - 1]);
     let path = dir.join("error.png");
     {
         let root = BitMapBackend::new(&path, (1200, 500)).into_drawing_area();
@@ -299,8 +309,12 @@ pub fn write_track_plots(r: &TrackResult, dir: &Path) -> Result<Vec<PathBuf>> {
         ))?;
         root.present()?;
     }
-    out.push(path);
+    Ok(path)
+}
 
+/// `theta.png`: θ̂1…θ̂6 of the adaptive law against time [s], every `step`-th point.
+fn theta_plot(r: &TrackResult, dir: &Path, step: usize) -> Result<PathBuf> {
+    let (t0, t1) = (r.t[0], r.t[r.t.len() - 1]);
     let path = dir.join("theta.png");
     {
         let root = BitMapBackend::new(&path, (1500, 800)).into_drawing_area();
@@ -325,8 +339,7 @@ pub fn write_track_plots(r: &TrackResult, dir: &Path) -> Result<Vec<PathBuf>> {
         }
         root.present()?;
     }
-    out.push(path);
-    Ok(out)
+    Ok(path)
 }
 
 /// Writes the plots of a diagnosis into `dir` (created if needed) and returns the files:
@@ -342,8 +355,20 @@ pub fn write_track_plots(r: &TrackResult, dir: &Path) -> Result<Vec<PathBuf>> {
 pub fn write_diagnosis_plots(d: &Diagnosis, dir: &Path) -> Result<Vec<PathBuf>> {
     register_font();
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let mut out = diagnosis_response_plots(d, dir)?;
+    out.push(diagnosis_correlation_plot(d, dir)?);
+    out.push(diagnosis_location_plot(d, dir)?);
+    Ok(out)
+}
+
+/// Axis labels and short names of the two channels.
+const CHANNEL_LABELS: [(&str, &str); 2] = [("v [m/s]", "v"), ("ω [rad/s]", "ω")];
+
+/// `diagnosis_response_<file>.png`, one per recording: measured, nominal and extended
+/// responses, validation blocks shaded.
+fn diagnosis_response_plots(d: &Diagnosis, dir: &Path) -> Result<Vec<PathBuf>> {
+    let labels = CHANNEL_LABELS;
     let mut out = Vec::new();
-    let labels = [("v [m/s]", "v"), ("ω [rad/s]", "ω")];
     for (i, s) in d.series.iter().enumerate() {
         let path = dir.join(format!("diagnosis_response_{}.png", stem(&s.source, i)));
         {
@@ -373,6 +398,13 @@ pub fn write_diagnosis_plots(d: &Diagnosis, dir: &Path) -> Result<Vec<PathBuf>> 
         }
         out.push(path);
     }
+    Ok(out)
+}
+
+/// `diagnosis_correlation.png`: each residual's cross-correlation with each command, nominal
+/// and final, with the independence bounds.
+fn diagnosis_correlation_plot(d: &Diagnosis, dir: &Path) -> Result<PathBuf> {
+    let labels = CHANNEL_LABELS;
     let path = dir.join("diagnosis_correlation.png");
     {
         let root = BitMapBackend::new(&path, (1400, 900)).into_drawing_area();
@@ -443,7 +475,12 @@ pub fn write_diagnosis_plots(d: &Diagnosis, dir: &Path) -> Result<Vec<PathBuf>> 
         }
         root.present()?;
     }
-    out.push(path);
+    Ok(path)
+}
+
+/// `diagnosis_location.png`: each residual's RMS by region of the commands, nominal and final.
+fn diagnosis_location_plot(d: &Diagnosis, dir: &Path) -> Result<PathBuf> {
+    let labels = CHANNEL_LABELS;
     let path = dir.join("diagnosis_location.png");
     {
         let root = BitMapBackend::new(&path, (1400, 600)).into_drawing_area();
@@ -507,8 +544,7 @@ pub fn write_diagnosis_plots(d: &Diagnosis, dir: &Path) -> Result<Vec<PathBuf>> 
         }
         root.present()?;
     }
-    out.push(path);
-    Ok(out)
+    Ok(path)
 }
 
 /// The runs of a migration check side by side (`wheelid migrate --plot DIR`):
