@@ -214,6 +214,21 @@ struct Field {
 }
 
 impl Field {
+    /// The field of the effects `ph` with the force effects `forces`, on a track [m].
+    fn new(forces: &Forces, track: f64, ph: &Terms) -> Self {
+        Self {
+            forces: forces.clone(),
+            track,
+            coulomb: ph.coulomb,
+            // Dry friction only when present: tanh dominates the cost of a step.
+            dry: ph.coulomb != [0.0, 0.0],
+            slip: ph.slip,
+            wheels: ph
+                .wheels
+                .map(|w| (w.right_gain, w.effort_max, w.mix * 0.5 * track)),
+        }
+    }
+
     /// ż for the state z = (v, ω, ∂v/∂p, ∂ω/∂p) under command `c`: θ with the reciprocals
     /// `inv` of θ1, θ2; `changed` after a payload change, when θ1, θ2, θ3, θ5 are no longer
     /// in force (their columns integrate without a source). Columns 0…7 are θ1…θ6, v0, ω0.
@@ -500,8 +515,6 @@ impl Extended {
         initial: &[f64],
     ) -> Result<[Vec<f64>; N]> {
         let sens = M > 0;
-        // Where each parameter's column sits in this pass (None: not in it).
-        let slot = |j: usize| (j < M).then_some(j);
         let &[v0, w0] = initial else {
             return Err(Error::InvalidSetting(format!(
                 "initial state must be [v, ω], got {} values",
@@ -516,27 +529,9 @@ impl Extended {
         let zoh = rec.command_hold() == CommandHold::Zoh;
         let avg = rec.velocity_sampling() == VelocitySampling::WindowAverage;
         let t0 = rec.t[0];
-        let d = self.track;
         // The command that holds the initial state, and its sensitivity to (θ, x0).
         let hold = holding_command(th0, initial);
-        let mut dhold = [[0.0; M]; 2];
-        if sens {
-            let [_, _, t3, t4, t5, t6] = *th0;
-            // (θ4 v0 − θ3 ω0², θ5 v0 ω0 + θ6 ω0)
-            for (j, dv, dw) in [
-                (2, -w0 * w0, 0.0),
-                (3, v0, 0.0),
-                (4, 0.0, v0 * w0),
-                (5, 0.0, w0),
-                (6, t4, t5 * w0),
-                (7, -2.0 * t3 * w0, t5 * v0 + t6),
-            ] {
-                if let Some(a) = slot(j) {
-                    dhold[0][a] = dv;
-                    dhold[1][a] = dw;
-                }
-            }
-        }
+        let dhold = hold_sensitivity::<M>(th0, v0, w0);
         let mut cursor = CommandCursor::new(rec, hold);
         // The recorded command at τ (the holding one before the record).
         let mut command = |tau: f64| {
@@ -547,79 +542,34 @@ impl Extended {
                 Cmd::at([c.0, c.1], [[0.0; M]; 2], false)
             }
         };
-        // Setpoint pipeline after the delay: saturation → rate limit (state) → asymmetry → drive
-        // gain.
-        let target = |c: Cmd<M>| match ph.sat {
-            Some(lim) => {
-                let mut out = c;
-                for (k, &l) in lim.iter().enumerate() {
-                    if c.u[k].abs() > l {
-                        out.u[k] = c.u[k].clamp(-l, l);
-                        out.du[k] = [0.0; M];
-                    }
-                }
-                out
-            }
-            None => c,
+        let pipe = Setpoints {
+            ph,
+            track: self.track,
+            t0,
         };
-        // Linear in the setpoint: the same map takes its sensitivities.
-        let shape = |s: [f64; 2], t: f64| {
-            let [mut uv, mut uw] = s;
-            if let Some(rho) = ph.ratio {
-                let (gr, gl) = (2.0 * rho / (1.0 + rho), 2.0 / (1.0 + rho));
-                let (vr, vl) = (gr * (uv + d * uw / 2.0), gl * (uv - d * uw / 2.0));
-                uv = (vr + vl) / 2.0;
-                uw = (vr - vl) / d;
-            }
-            let g = 1.0 + ph.drift * (t - t0);
-            [uv * g, uw * g]
-        };
-        let shaped = |c: &Cmd<M>, t: f64| {
-            let mut out = *c;
-            out.u = shape(c.u, t);
-            out.g = 1.0 + ph.drift * (t - t0);
-            if c.live {
-                for j in 0..M {
-                    let col = shape([c.du[0][j], c.du[1][j]], t);
-                    out.du[0][j] = col[0];
-                    out.du[1][j] = col[1];
-                }
-            }
-            out
-        };
-        // Dry friction only when present: tanh dominates the cost of a step.
-        let dry = ph.coulomb != [0.0, 0.0];
         // θ with the reciprocals of θ1, θ2 and its integration sub-step, before and after a
         // payload change: a step multiplies instead of dividing.
         let prepare = |th: [f64; 6], after: bool| (th, [1.0 / th[0], 1.0 / th[1]], after);
         let (before, after) = (prepare(*th0, false), th_after.map(|a| prepare(a, true)));
-        let field = Field {
-            forces: forces.clone(),
-            track: self.track,
-            coulomb: ph.coulomb,
-            dry,
-            slip: ph.slip,
-            wheels: ph
-                .wheels
-                .map(|w| (w.right_gain, w.effort_max, w.mix * 0.5 * self.track)),
-        };
+        let field = Field::new(forces, self.track, ph);
         // The rate-limited setpoint starts where it holds the initial state (a robot at rest
         // holds zero), as the simulator's.
         let mut setpoint = if ph.accel.is_some() {
             Cmd::at([hold.0, hold.1], dhold, sens)
         } else {
-            target(command(t0 - ph.delay))
+            pipe.target(command(t0 - ph.delay))
         };
         let fixed_setpoint = zoh && ph.accel.is_none() && ph.drift == 0.0;
         let m = grid.len();
+        // (v0, ω0); the θ columns start at 0, ∂(v, ω)/∂(v0, ω0) at I (columns 6, 7 where this
+        // pass holds them).
         let mut z = [0.0; N];
-        z[0] = v0;
-        z[1] = w0;
-        if let Some(a) = slot(6) {
-            z[2 + a] = 1.0;
+        (z[0], z[1]) = (v0, w0);
+        if 6 < M {
+            z[2 + 6] = 1.0;
         }
-        if let Some(a) = slot(7) {
-            z[2 + M + a] = 1.0;
+        if 7 < M {
+            z[2 + M + 7] = 1.0;
         }
         let mut y: [Vec<f64>; N] = std::array::from_fn(|c| {
             let mut v = Vec::with_capacity(m);
@@ -637,76 +587,173 @@ impl Extended {
             let cb = if zoh { ca } else { command(tb - ph.delay) };
             let rhs_at = |x: &[f64; N], c: Cmd<M>| field.rhs(&th, &inv, changed, x, &c);
             let plan = dynamics::plan(&th, span);
-            let exponential = plan.exponential();
-            // RK4, or ETDRK4 on the Jacobian's diagonal when θ is stiff for this interval.
-            let step = |z: &mut [f64; N], q: &mut [f64; N], u0: Cmd<M>, u1: Cmd<M>, h: f64| {
-                if exponential {
-                    let lin = dynamics::diagonal_jacobian(rhs_at, z, u0);
-                    dynamics::etdrk4_step(rhs_at, lin, z, q, u0, u1, h);
-                } else {
-                    dynamics::rk4_step(rhs_at, z, q, u0, u1, h);
-                }
-            };
-            let mut q = [0.0; N];
-            if fixed_setpoint {
+            let q = if fixed_setpoint {
                 // Held command, no rate limit, no drift: one setpoint for the whole interval.
-                setpoint = target(ca);
-                let u = shaped(&setpoint, ta);
-                for sub in plan.substeps() {
-                    step(&mut z, &mut q, u, u, sub.h);
-                }
-            }
-            for sub in plan.substeps().filter(|_| !fixed_setpoint) {
-                let dynamics::Substep { f0, f1, h, t0, t1 } = sub;
-                let (tau0, tau1) = (ta + t0, ta + t1);
-                let s0 = setpoint;
-                let tgt = target(ca.lerp(&cb, f1));
-                let s1 = match ph.accel {
-                    Some(a) => {
-                        let mut s1 = tgt;
-                        for (k, &rate) in a.iter().enumerate() {
-                            let step = rate * h;
-                            s1.u[k] = s0.u[k] + (tgt.u[k] - s0.u[k]).clamp(-step, step);
-                            // Slewing, the setpoint keeps its own sensitivity.
-                            if (tgt.u[k] - s0.u[k]).abs() > step {
-                                s1.du[k] = s0.du[k];
-                                s1.live |= s0.live;
-                            }
-                        }
-                        s1
-                    }
-                    None => tgt,
-                };
-                let s_start = if ph.accel.is_some() {
-                    s0
-                } else {
-                    target(ca.lerp(&cb, f0))
-                };
-                let u0 = shaped(&s_start, tau0);
-                let u1 = shaped(&s1, tau1);
-                step(&mut z, &mut q, u0, u1, h);
-                setpoint = s1;
-            }
+                setpoint = pipe.target(ca);
+                let u = pipe.shaped(&setpoint, ta);
+                step_interval(rhs_at, &plan, &mut z, |_| (u, u))
+            } else {
+                step_interval(rhs_at, &plan, &mut z, |sub| {
+                    let dynamics::Substep { f0, f1, h, t0, t1 } = sub;
+                    let s0 = setpoint;
+                    let s1 = pipe.slew(s0, pipe.target(ca.lerp(&cb, f1)), h);
+                    let s_start = if ph.accel.is_some() {
+                        s0
+                    } else {
+                        pipe.target(ca.lerp(&cb, f0))
+                    };
+                    setpoint = s1;
+                    (pipe.shaped(&s_start, ta + t0), pipe.shaped(&s1, ta + t1))
+                })
+            };
             for (c, yc) in y.iter_mut().enumerate() {
                 yc.push(if avg { q[c] / span } else { z[c] });
             }
         }
-        // Back to the recording's samples: instants, or length-weighted window averages.
-        Ok(std::array::from_fn(|c| {
-            let yc = &y[c];
-            let mut o = Vec::with_capacity(rec.len());
-            for (k, &i) in index.iter().enumerate() {
-                if !avg || k == 0 {
-                    o.push(yc[i]);
-                } else {
-                    let i0 = index[k - 1];
-                    let total: f64 = (i0 + 1..=i).map(|j| (grid[j] - grid[j - 1]) * yc[j]).sum();
-                    o.push(total / (grid[i] - grid[i0]));
-                }
-            }
-            o
-        }))
+        Ok(to_samples(&y, &grid, &index, avg))
     }
+}
+
+/// Integrates `z` over one interval of the grid by `plan`'s sub-steps — RK4, or ETDRK4 on the
+/// Jacobian's diagonal when θ is stiff for it — under the commands `commands(sub-step)` gives
+/// at each sub-step's start and end; returns ∫z over the interval.
+fn step_interval<const N: usize, const M: usize>(
+    rhs_at: impl Fn(&[f64; N], Cmd<M>) -> [f64; N] + Copy,
+    plan: &dynamics::Plan,
+    z: &mut [f64; N],
+    mut commands: impl FnMut(dynamics::Substep) -> (Cmd<M>, Cmd<M>),
+) -> [f64; N] {
+    let mut q = [0.0; N];
+    for sub in plan.substeps() {
+        let (u0, u1) = commands(sub);
+        if plan.exponential() {
+            let lin = dynamics::diagonal_jacobian(rhs_at, z, u0);
+            dynamics::etdrk4_step(rhs_at, lin, z, &mut q, u0, u1, sub.h);
+        } else {
+            dynamics::rk4_step(rhs_at, z, &mut q, u0, u1, sub.h);
+        }
+    }
+    q
+}
+
+/// The sensitivity to (θ, x0) of the command that holds the initial state (v0, ω0),
+/// (θ4 v0 − θ3 ω0², θ5 v0 ω0 + θ6 ω0), in a pass's `M` columns (parameter j in column j < M).
+fn hold_sensitivity<const M: usize>(th0: &[f64; 6], v0: f64, w0: f64) -> [[f64; M]; 2] {
+    let [_, _, t3, t4, t5, t6] = *th0;
+    let mut dhold = [[0.0; M]; 2];
+    for (j, dv, dw) in [
+        (2, -w0 * w0, 0.0),
+        (3, v0, 0.0),
+        (4, 0.0, v0 * w0),
+        (5, 0.0, w0),
+        (6, t4, t5 * w0),
+        (7, -2.0 * t3 * w0, t5 * v0 + t6),
+    ] {
+        if j < M {
+            dhold[0][j] = dv;
+            dhold[1][j] = dw;
+        }
+    }
+    dhold
+}
+
+/// The setpoint pipeline after the delay: saturation → rate limit (a state) → asymmetry →
+/// drive gain, each carrying the setpoint's sensitivities in `M` columns.
+struct Setpoints<'a> {
+    ph: &'a Terms,
+    /// Wheel track [m].
+    track: f64,
+    /// The recording's first instant [s] (the drift's origin).
+    t0: f64,
+}
+
+impl Setpoints<'_> {
+    /// Saturation: a clipped component holds the limit and loses its sensitivity.
+    fn target<const M: usize>(&self, c: Cmd<M>) -> Cmd<M> {
+        let Some(lim) = self.ph.sat else {
+            return c;
+        };
+        let mut out = c;
+        for (k, &l) in lim.iter().enumerate() {
+            if c.u[k].abs() > l {
+                out.u[k] = c.u[k].clamp(-l, l);
+                out.du[k] = [0.0; M];
+            }
+        }
+        out
+    }
+
+    /// The rate limit: from `s0` toward `tgt` by at most the limit × `h`; a slewing component
+    /// keeps its own sensitivity.
+    fn slew<const M: usize>(&self, s0: Cmd<M>, tgt: Cmd<M>, h: f64) -> Cmd<M> {
+        let Some(a) = self.ph.accel else {
+            return tgt;
+        };
+        let mut s1 = tgt;
+        for (k, &rate) in a.iter().enumerate() {
+            let step = rate * h;
+            s1.u[k] = s0.u[k] + (tgt.u[k] - s0.u[k]).clamp(-step, step);
+            if (tgt.u[k] - s0.u[k]).abs() > step {
+                s1.du[k] = s0.du[k];
+                s1.live |= s0.live;
+            }
+        }
+        s1
+    }
+
+    /// Asymmetry and drive gain at `t` [s]: linear in the setpoint, so the same map takes its
+    /// sensitivities.
+    fn shape(&self, s: [f64; 2], t: f64) -> [f64; 2] {
+        let (ph, d) = (self.ph, self.track);
+        let [mut uv, mut uw] = s;
+        if let Some(rho) = ph.ratio {
+            let (gr, gl) = (2.0 * rho / (1.0 + rho), 2.0 / (1.0 + rho));
+            let (vr, vl) = (gr * (uv + d * uw / 2.0), gl * (uv - d * uw / 2.0));
+            uv = (vr + vl) / 2.0;
+            uw = (vr - vl) / d;
+        }
+        let g = 1.0 + ph.drift * (t - self.t0);
+        [uv * g, uw * g]
+    }
+
+    /// [`Setpoints::shape`] of a command and of its live sensitivities, with the drive gain.
+    fn shaped<const M: usize>(&self, c: &Cmd<M>, t: f64) -> Cmd<M> {
+        let mut out = *c;
+        out.u = self.shape(c.u, t);
+        out.g = 1.0 + self.ph.drift * (t - self.t0);
+        if c.live {
+            for j in 0..M {
+                let col = self.shape([c.du[0][j], c.du[1][j]], t);
+                out.du[0][j] = col[0];
+                out.du[1][j] = col[1];
+            }
+        }
+        out
+    }
+}
+
+/// The fine grid's outputs back on the recording's samples (`index`: each sample's grid
+/// point): instants, or length-weighted window averages.
+fn to_samples<const N: usize>(
+    y: &[Vec<f64>; N],
+    grid: &[f64],
+    index: &[usize],
+    avg: bool,
+) -> [Vec<f64>; N] {
+    std::array::from_fn(|c| {
+        let yc = &y[c];
+        let mut o = Vec::with_capacity(index.len());
+        for (k, &i) in index.iter().enumerate() {
+            if !avg || k == 0 {
+                o.push(yc[i]);
+            } else {
+                let i0 = index[k - 1];
+                let total: f64 = (i0 + 1..=i).map(|j| (grid[j] - grid[j - 1]) * yc[j]).sum();
+                o.push(total / (grid[i] - grid[i0]));
+            }
+        }
+        o
+    })
 }
 
 #[cfg(test)]
