@@ -373,16 +373,10 @@ pub fn identify_with(
 
 /// `name` is least squares or one of `estimators`.
 fn check_estimator(name: &str, estimators: &[Box<dyn Estimator>]) -> Result<(), IdentifyError> {
-    if name == crate::estimators::LEAST_SQUARES || estimators.iter().any(|e| e.name() == name) {
-        return Ok(());
-    }
     let known: Vec<&str> = std::iter::once(crate::estimators::LEAST_SQUARES)
         .chain(estimators.iter().map(|e| e.name()))
         .collect();
-    Err(IdentifyError::Setting(format!(
-        "unknown estimator `{name}`; known estimators: {} (a plugin's with --plugin LIB)",
-        known.join(", ")
-    )))
+    crate::estimators::check_name(name, &known).map_err(IdentifyError::Setting)
 }
 
 /// At least one recording, and bounds (when given) for each of the model's parameters.

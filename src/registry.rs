@@ -117,13 +117,8 @@ impl Registry {
     /// An unknown name, listing the known ones.
     pub fn check_estimator(&self, name: &str) -> Result<()> {
         let names = self.estimator_names();
-        if names.iter().any(|n| n == name) {
-            return Ok(());
-        }
-        Err(anyhow!(
-            "unknown estimator `{name}`; known estimators: {} (a plugin's with --plugin LIB)",
-            names.join(", ")
-        ))
+        let known: Vec<&str> = names.iter().map(String::as_str).collect();
+        estimators::check_name(name, &known).map_err(|e| anyhow!(e))
     }
 }
 

@@ -16,6 +16,21 @@ pub const LEAST_SQUARES: &str = "ls";
 /// The built-in estimator names in report order, least squares first.
 pub const BUILT_IN: [&str; 3] = [LEAST_SQUARES, iv::NAME, oe::NAME];
 
+/// Checks that `name` is one of the estimators `known` (least squares among them), for every
+/// place that takes an estimator's name (`identify --estimator`, a run config, the library).
+///
+/// # Errors
+/// The message naming the known estimators.
+pub fn check_name(name: &str, known: &[&str]) -> Result<(), String> {
+    if known.contains(&name) {
+        return Ok(());
+    }
+    Err(format!(
+        "unknown estimator `{name}`; known estimators: {} (a plugin's with --plugin LIB)",
+        known.join(", ")
+    ))
+}
+
 /// The built-in refining estimators, in report order (after least squares).
 pub fn built_in() -> Vec<Box<dyn Estimator>> {
     vec![Box::new(iv::Iv), Box::new(oe::Oe)]
