@@ -35,6 +35,7 @@ pub mod export;
 pub mod files;
 pub mod identify;
 pub mod migrate;
+pub mod observer;
 pub mod plot;
 pub mod plugins;
 pub mod registry;

@@ -283,8 +283,10 @@ struct TrackArgs {
 }
 
 fn run_run(a: RunArgs) -> Result<()> {
-    use std::io::IsTerminal;
-    let out = wheelid::run::run(&a.config, std::io::stderr().is_terminal())?;
+    let bar = Bar::new(!a.json, "{spinner} {msg} [{bar:30}] {pos}/{len} samples");
+    let out = wheelid::run::run(&a.config, &bar);
+    bar.0.finish_and_clear();
+    let out = out?;
     if a.json {
         out!(
             "{}",
@@ -753,7 +755,7 @@ fn run_diagnose(a: DiagnoseArgs) -> Result<()> {
             .map(|f| wheelid::files::read_recording(f, Columns::Required))
             .collect::<Result<Vec<_>, _>>()?
     };
-    let bar = Bar::new(!a.json);
+    let bar = Bar::new(!a.json, "{spinner} diagnose [{bar:30}] {pos}/{len} {msg}");
     let d = wheelid::diagnose::diagnose_observed(&recordings, model.as_ref(), &settings, &bar)?;
     bar.0.finish_and_clear();
     if a.json {
@@ -778,31 +780,31 @@ fn run_diagnose(a: DiagnoseArgs) -> Result<()> {
     Ok(())
 }
 
-/// The diagnosis's progress as a bar on standard error (hidden when it is not a terminal or
-/// the output is JSON).
+/// A library call's progress ([`wheelid::observer::Observer`]) as a bar on standard error in
+/// the indicatif `template` (hidden when it is not a terminal or the output is JSON).
 struct Bar(indicatif::ProgressBar);
 
 impl Bar {
-    fn new(show: bool) -> Self {
+    fn new(show: bool, template: &str) -> Self {
         use std::io::IsTerminal;
         let bar = if show && std::io::stderr().is_terminal() {
-            indicatif::ProgressBar::new(4)
+            indicatif::ProgressBar::no_length()
         } else {
             indicatif::ProgressBar::hidden()
         };
         bar.set_style(
-            indicatif::ProgressStyle::with_template(
-                "{spinner} diagnose [{bar:30}] {pos}/{len} {msg}",
-            )
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+            indicatif::ProgressStyle::with_template(template)
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
         );
         Self(bar)
     }
 }
 
-impl wheelid::diagnose::Observer for Bar {
+impl wheelid::observer::Observer for Bar {
     fn progress(&self, message: &str, done: u64, total: u64) {
-        self.0.set_length(total);
+        if total > 0 {
+            self.0.set_length(total);
+        }
         self.0.set_position(done);
         self.0.set_message(message.to_owned());
     }

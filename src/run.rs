@@ -47,7 +47,6 @@ use std::fmt::Debug;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, Result, anyhow, bail};
-use indicatif::{ProgressBar, ProgressStyle};
 use serde::Deserialize;
 use wheelid_core::{ConditionSettings, Recording, RegressorModel, Robot, RobotError, Solver};
 use wheelid_robots::khepera::{Khepera, KheperaServer, KheperaSettings};
@@ -59,6 +58,7 @@ use wheelid_robots::{RobotProfile, SimRobot, SimSettings};
 use crate::config::{ExcitationConfig, robot_profile};
 use crate::files::{ModelFile, toml_msg};
 use crate::identify::{Identification, IdentifySettings, identify_with};
+use crate::observer::Observer;
 use crate::plugins::Plugins;
 use crate::registry::Registry;
 
@@ -508,15 +508,15 @@ pub fn parse_config(text: &str, path: &Path) -> Result<()> {
         .map_err(|e| anyhow!("{}: {}", path.display(), toml_msg(text, &e)))
 }
 
-/// Runs the job described by the config file at `path`; `progress` shows a bar while the robot
-/// is driven.
+/// Runs the job described by the config file at `path`, reporting the drive's progress to
+/// `observer` ([`drive`]).
 ///
 /// # Errors
 /// Config errors (file, line, section), plugin errors, robot errors, identification errors,
 /// output errors. The drive's recording is written as soon as the robot stops (an
 /// identification that fails never loses it); the model and the reports only after the
 /// identification succeeded; each file atomically.
-pub fn run(path: &Path, progress: bool) -> Result<RunOutput> {
+pub fn run(path: &Path, observer: &dyn Observer) -> Result<RunOutput> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     let file: RunFile = toml::from_str(&text)
@@ -529,14 +529,92 @@ pub fn run(path: &Path, progress: bool) -> Result<RunOutput> {
     // Plugins first: they may provide any of the four.
     let registry = Registry::load(base, &file.plugins)?;
     let plugins = registry.plugins();
-    let [plugin_robots, plugin_models, plugin_solvers, _] = plugins.names();
+    let [plugin_robots, ..] = plugins.names();
     let table = |section, table| Table {
         section,
         table,
         file: path,
         text: &text,
     };
-    let model_t = table("model", &file.model);
+    let (model, (solver, bounds)) = model_and_solver(
+        &table("model", &file.model),
+        &table("solver", &file.solver),
+        &registry,
+    )?;
+    let estimator = estimator_named(file.identify.estimator.as_ref(), &registry, path, &text)?;
+    let robot_t = table("robot", &file.robot);
+    let kind = robot_t.kind()?;
+    let mut robot = connect_table(&robot_t, plugins, &plugin_robots, &cx)?;
+    let excitation = match &file.excitation {
+        Some(e) => e.build()?,
+        None => ExcitationConfig::ThesisPioneer.build()?,
+    };
+    // A replayed log runs to its end unless told otherwise; a live robot 150 s.
+    let duration = match (file.duration_s, kind.as_str()) {
+        (Some(d), _) => Some(d),
+        (None, "replay") => None,
+        (None, _) => Some(150.0),
+    };
+    if let Some(d) = duration
+        && !(d.is_finite() && d > 0.0)
+    {
+        bail!("{}: duration_s = {d} must be > 0", path.display());
+    }
+    let recording = drive(robot.as_mut(), &excitation, duration, observer)
+        .with_context(|| format!("driving the {} robot", robot.name()))?;
+    let settings = IdentifySettings {
+        bounds,
+        estimator: estimator.unwrap_or_else(|| IdentifySettings::default().estimator),
+        condition: ConditionSettings {
+            cutoff_hz: file.identify.cutoff_hz,
+            order: file
+                .identify
+                .order
+                .unwrap_or(ConditionSettings::default().order),
+            ..ConditionSettings::default()
+        },
+        ..IdentifySettings::default()
+    };
+    // The drive is written before it is identified: a robot's run is never lost to an
+    // identification that fails.
+    let dir = base.join(&file.output.dir);
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    let files = vec![
+        dir.join("recording.csv"),
+        dir.join("model.toml"),
+        dir.join("report.txt"),
+        dir.join("report.json"),
+    ];
+    recording.write_csv(&files[0])?;
+    let identification = identify_with(
+        std::slice::from_ref(&recording),
+        model.as_ref(),
+        solver.as_ref(),
+        &registry.estimators()?,
+        &settings,
+    )
+    .with_context(|| format!("identifying (the drive is kept in {})", files[0].display()))?;
+    write_outputs(&files, &recording, &identification)?;
+    Ok(RunOutput {
+        recording,
+        identification,
+        files,
+    })
+}
+
+/// The model and the solver (with its bounds) the config's `[model]` and `[solver]` tables
+/// name, built-in or a plugin's.
+///
+/// # Errors
+/// An unknown type or bad settings, with the file, line and column; bounds that do not match
+/// the model's parameters.
+fn model_and_solver(
+    model_t: &Table<'_>,
+    solver_t: &Table<'_>,
+    registry: &Registry,
+) -> Result<(Box<dyn RegressorModel>, SolverWithBounds)> {
+    let plugins = registry.plugins();
+    let [_, plugin_models, plugin_solvers, _] = plugins.names();
     let kind = model_t.kind()?;
     let model: Box<dyn RegressorModel> = if MODEL_TYPES.contains(&kind.as_str()) {
         model_t.built_in::<dyn ModelSpec>()?.build()
@@ -546,7 +624,6 @@ pub fn run(path: &Path, progress: bool) -> Result<RunOutput> {
     } else {
         return Err(model_t.unknown(&kind, &MODEL_TYPES, &plugin_models));
     };
-    let solver_t = table("solver", &file.solver);
     let kind = solver_t.kind()?;
     let (solver, bounds): (Box<dyn Solver>, _) = if SOLVER_TYPES.contains(&kind.as_str()) {
         solver_t
@@ -572,78 +649,27 @@ pub fn run(path: &Path, progress: bool) -> Result<RunOutput> {
             model.name()
         )));
     }
-    let estimator = estimator_named(file.identify.estimator.as_ref(), &registry, path, &text)?;
-    let robot_t = table("robot", &file.robot);
-    let kind = robot_t.kind()?;
-    let mut robot = connect_table(&robot_t, plugins, &plugin_robots, &cx)?;
-    let excitation = match &file.excitation {
-        Some(e) => e.build()?,
-        None => ExcitationConfig::ThesisPioneer.build()?,
-    };
-    // A replayed log runs to its end unless told otherwise; a live robot 150 s.
-    let duration = match (file.duration_s, kind.as_str()) {
-        (Some(d), _) => Some(d),
-        (None, "replay") => None,
-        (None, _) => Some(150.0),
-    };
-    if let Some(d) = duration
-        && !(d.is_finite() && d > 0.0)
-    {
-        bail!("{}: duration_s = {d} must be > 0", path.display());
-    }
-    let recording = drive(robot.as_mut(), &excitation, duration, progress)
-        .with_context(|| format!("driving the {} robot", robot.name()))?;
-    let mut settings = IdentifySettings {
-        bounds,
-        ..IdentifySettings::default()
-    };
-    if let Some(name) = estimator {
-        settings.estimator = name;
-    }
-    settings.condition = ConditionSettings {
-        cutoff_hz: file.identify.cutoff_hz,
-        order: file
-            .identify
-            .order
-            .unwrap_or(ConditionSettings::default().order),
-        ..ConditionSettings::default()
-    };
-    // The drive is written before it is identified: a robot's run is never lost to an
-    // identification that fails.
-    let dir = base.join(&file.output.dir);
-    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-    let files = vec![
-        dir.join("recording.csv"),
-        dir.join("model.toml"),
-        dir.join("report.txt"),
-        dir.join("report.json"),
-    ];
-    recording.write_csv(&files[0])?;
-    let identification = identify_with(
-        std::slice::from_ref(&recording),
-        model.as_ref(),
-        solver.as_ref(),
-        &registry.estimators()?,
-        &settings,
-    )
-    .with_context(|| format!("identifying (the drive is kept in {})", files[0].display()))?;
-    ModelFile::from_identification(&identification)
-        .on_robot_of(std::slice::from_ref(&recording), None)
+    Ok((model, (solver, bounds)))
+}
+
+/// Writes the model file and the text and JSON reports of `identification` into `files[1..4]`
+/// (the drive is `files[0]`, written before), each atomically.
+///
+/// # Errors
+/// The file that could not be written.
+fn write_outputs(files: &[PathBuf], recording: &Recording, id: &Identification) -> Result<()> {
+    ModelFile::from_identification(id)
+        .on_robot_of(std::slice::from_ref(recording), None)
         .write(&files[1])?;
     let write = |p: &Path, s: String| {
         wheelid_core::recording::write_atomic(p, s.as_bytes())
             .with_context(|| format!("writing {}", p.display()))
     };
-    write(&files[2], crate::report::to_text(&identification, None))?;
+    write(&files[2], crate::report::to_text(id, None))?;
     write(
         &files[3],
-        serde_json::to_string_pretty(&crate::report::to_json(&identification, None))?,
-    )?;
-    Ok(RunOutput {
-        recording,
-        identification,
-        files,
-    })
+        serde_json::to_string_pretty(&crate::report::to_json(id, None))?,
+    )
 }
 
 /// The `[identify] estimator` of the config `text` (read from `path`), checked against the
@@ -728,7 +754,8 @@ pub fn connect_robot(path: &Path, duration_s: f64) -> Result<Box<dyn Robot>> {
 /// Drives `robot` with `excitation` for `duration` seconds (`None`: until it has no more
 /// data, as a replayed log):
 /// read, then send, once per period; row k = (t_k, the command as the robot takes it, v_k,
-/// ω_k, pose_k). Stops the robot at the end, also on error.
+/// ω_k, pose_k). Stops the robot at the end, also on error. Reports `driving`, samples done
+/// of the samples planned (0: until the end of a log), to `observer` once per sample.
 ///
 /// # Errors
 /// The robot's errors; fewer than 10 samples.
@@ -736,26 +763,18 @@ pub fn drive(
     robot: &mut dyn Robot,
     excitation: &wheelid_robots::Excitation,
     duration: Option<f64>,
-    progress: bool,
+    observer: &dyn Observer,
 ) -> Result<Recording> {
     let dt = robot.period_s();
     if !(dt.is_finite() && dt > 0.0) {
         bail!("the robot's period {dt} s must be > 0");
     }
     let n = duration.map_or(usize::MAX, |d| (d / dt).round() as usize);
-    let bar = match (progress, duration) {
-        (false, _) => ProgressBar::hidden(),
-        (true, Some(_)) => ProgressBar::new(n as u64),
-        (true, None) => ProgressBar::no_length(),
-    };
-    bar.set_style(
-        ProgressStyle::with_template("{spinner} driving [{bar:30}] {pos}/{len} samples")
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
+    let planned = duration.map_or(0, |_| n as u64);
     let mut cols: [Vec<f64>; 8] = std::array::from_fn(|_| Vec::with_capacity(n.min(1 << 20)));
     let mut t0 = None;
     let result = (|| -> Result<()> {
-        for _ in 0..n {
+        for k in 0..n {
             let o = match robot.read() {
                 Ok(o) => o,
                 Err(RobotError::Ended) => break,
@@ -776,12 +795,11 @@ pub fn drive(
             ]) {
                 c.push(x);
             }
-            bar.inc(1);
+            observer.progress("driving", k as u64 + 1, planned);
         }
         Ok(())
     })();
     let stopped = robot.stop();
-    bar.finish_and_clear();
     result?;
     stopped?;
     let [t, v_ref, w_ref, v, w, x, y, phi] = cols;

@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::Mutex;
 
+use wheelid::observer::Silent;
 use wheelid::run::run;
 
 fn config(name: &str) -> PathBuf {
@@ -35,7 +36,7 @@ const KHEPERA: [f64; 6] = [0.0228, 0.0568, -0.0001, 1.0030, 0.0732, 0.9981];
 
 #[test]
 fn the_simulator_config_identifies_the_pioneer_and_writes_every_output() {
-    let out = run(&config("run_simulator.toml"), false).expect("runs");
+    let out = run(&config("run_simulator.toml"), &Silent).expect("runs");
     assert_eq!(out.recording.len(), 1500);
     assert_eq!(
         out.recording.meta("velocity_sampling"),
@@ -56,7 +57,7 @@ fn the_simulator_config_identifies_the_pioneer_and_writes_every_output() {
 
 #[test]
 fn the_physics_config_identifies_the_rigid_body_khepera_within_one_percent_of_its_map() {
-    let out = run(&config("run_physics.toml"), false).expect("runs");
+    let out = run(&config("run_physics.toml"), &Silent).expect("runs");
     assert_eq!(out.recording.meta("timing"), Some("window_end"));
     let map = wheelid::robots::physics::PhysicalProfile::khepera3().theta();
     assert_close(&out.identification.theta, &map, 0.01, "physics khepera");
@@ -64,7 +65,7 @@ fn the_physics_config_identifies_the_rigid_body_khepera_within_one_percent_of_it
 
 #[test]
 fn the_pioneer_over_arcos_against_the_loopback_server_is_identified() {
-    let out = run(&config("run_pioneer_loopback.toml"), false).expect("runs");
+    let out = run(&config("run_pioneer_loopback.toml"), &Silent).expect("runs");
     assert_eq!(out.recording.len(), 1200);
     // The protocol's resolution (1 mm/s, 1 °/s) costs little.
     assert_close(&out.identification.theta, &PIONEER, 0.01, "pioneer");
@@ -72,7 +73,7 @@ fn the_pioneer_over_arcos_against_the_loopback_server_is_identified() {
 
 #[test]
 fn the_khepera_over_its_serial_protocol_against_the_loopback_server_is_identified() {
-    let out = run(&config("run_khepera_loopback.toml"), false).expect("runs");
+    let out = run(&config("run_khepera_loopback.toml"), &Silent).expect("runs");
     assert_eq!(out.recording.len(), 3000);
     assert_close(&out.identification.theta, &KHEPERA, 0.01, "khepera");
 }
@@ -108,7 +109,7 @@ fn a_ros2_bag_made_by_the_simulator_replays_and_identifies() {
     let (a, b) = (read(&committed), read(&remade));
     assert_eq!((&a.t, &a.v_ref, &a.w_ref), (&b.t, &b.v_ref, &b.w_ref));
     assert_eq!((&a.v, &a.w), (&b.v, &b.w));
-    let out = run(&config("run_replay_mcap.toml"), false).expect("runs");
+    let out = run(&config("run_replay_mcap.toml"), &Silent).expect("runs");
     assert_eq!(out.recording.len(), 2001);
     assert_eq!(out.recording.meta("timing"), Some("window_end"));
     assert_close(&out.identification.theta, &KHEPERA, 0.01, "mcap replay");
@@ -125,7 +126,7 @@ fn a_csv_replays_the_real_husky() {
         );
         return;
     }
-    let out = run(&config("run_replay_csv.toml"), false).expect("runs");
+    let out = run(&config("run_replay_csv.toml"), &Silent).expect("runs");
     let direct = wheelid::core::Recording::read_csv(&csv).expect("reads");
     // Every sample comes back with its own command, and the fit is the Husky's (the
     // identification test reports v about 89 % and ω about 75 % on all four segments).
@@ -257,7 +258,7 @@ fn a_plugin_model_is_identified_and_diagnosed_from_the_command_line() {
     // diagnosed by `identify --plugin` and `diagnose --plugin`, which load the same library.
     let dir = tempfile::tempdir().expect("tempdir");
     let lib = good_plugin(dir.path());
-    let out = run(&plugin_config(&lib, dir.path()), false).expect("runs");
+    let out = run(&plugin_config(&lib, dir.path()), &Silent).expect("runs");
     let csv = dir.path().join("burger.csv");
     out.recording.write_csv(&csv).expect("writes");
     let wheelid = |cmd: &str| {
@@ -403,7 +404,7 @@ fn a_plugin_estimator_is_chosen_by_name_compared_and_resists_spikes() {
 fn the_example_plugin_adds_a_robot_and_a_model_that_identify() {
     let dir = tempfile::tempdir().expect("tempdir");
     let lib = good_plugin(dir.path());
-    let out = run(&plugin_config(&lib, dir.path()), false).expect("runs");
+    let out = run(&plugin_config(&lib, dir.path()), &Silent).expect("runs");
     let id = &out.identification;
     assert_eq!(id.model, "vw-pd-coulomb");
     // The Burger's true θ and dry friction (examples/turtlebot-plugin/src/burger.rs).
@@ -427,7 +428,7 @@ fn the_example_plugin_adds_a_robot_and_a_model_that_identify() {
 fn every_plugin_failure_is_a_clear_error() {
     let dir = tempfile::tempdir().expect("tempdir");
     let err = |lib: &Path| -> String {
-        match run(&plugin_config(lib, dir.path()), false) {
+        match run(&plugin_config(lib, dir.path()), &Silent) {
             Ok(_) => panic!("{} loaded", lib.display()),
             Err(e) => format!("{e:#}"),
         }
@@ -470,7 +471,7 @@ fn run_text(text: &str) -> String {
     let dir = tempfile::tempdir().expect("tempdir");
     let path = dir.path().join("bad.toml");
     std::fs::write(&path, text).expect("write");
-    match run(&path, false) {
+    match run(&path, &Silent) {
         Ok(_) => panic!("ran:\n{text}"),
         Err(e) => format!("{e:#}"),
     }

@@ -341,19 +341,7 @@ struct Current {
     jacobian: Option<DMatrix<f64>>,
 }
 
-/// What a diagnosis reports while it runs (as argmin's observers): the binary draws a progress
-/// bar from it, the library draws nothing.
-pub trait Observer: Sync {
-    /// `message` says what runs now; `done` of `total` units of work are finished (the total
-    /// grows as the search nominates candidates to fit).
-    fn progress(&self, _message: &str, _done: u64, _total: u64) {}
-}
-
-/// An [`Observer`] that ignores everything.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct Silent;
-
-impl Observer for Silent {}
+pub use crate::observer::{Observer, Silent};
 
 /// Counts the units of work done and passes them to an [`Observer`].
 struct Progress<'a> {
