@@ -1,0 +1,31 @@
+//! `wheelid run`: a whole identification job from a TOML file.
+
+use crate::*;
+
+#[derive(clap::Args)]
+pub(crate) struct RunArgs {
+    /// The run's TOML configuration.
+    config: PathBuf,
+    /// Print the report as JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+pub(crate) fn run_run(a: RunArgs) -> Result<()> {
+    let bar = Bar::new(!a.json, "{spinner} {msg} [{bar:30}] {pos}/{len} samples");
+    let out = wheelid::run::run(&a.config, &bar);
+    bar.0.finish_and_clear();
+    let out = out?;
+    if a.json {
+        out!(
+            "{}",
+            serde_json::to_string_pretty(&report::to_json(&out.identification, None))?
+        );
+    } else {
+        out_raw!("{}", report::to_text(&out.identification, None));
+        for f in &out.files {
+            out!("written: {}", f.display());
+        }
+    }
+    Ok(())
+}
