@@ -17,7 +17,6 @@
 //!    compare with the measurements (fit %, as MATLAB's `compare`); estimate θ4 and θ6 from
 //!    steady constant-command segments as the thesis's §4.1 suggests.
 
-use std::borrow::Cow;
 use std::path::PathBuf;
 
 use serde::Serialize;
@@ -274,20 +273,12 @@ pub fn identify_with(
     // A constant command whose channel least squares still solved (noise makes the
     // regressors full rank) is no information either.
     checks::check_excitation(recordings)?;
-    let mut estimates = vec![ls.report.clone()];
-    let (mut free_runs, mut noise_std, mut timing) = (Vec::new(), None, None);
-    for estimator in estimators {
-        let name = estimator.name();
-        if name != settings.estimator && !settings.compare {
-            continue;
-        }
-        let (report, refined) =
-            estimators::refine(estimator.as_ref(), model, &data, &ls.report.theta, settings)?;
-        noise_std = refined.noise_std.or(noise_std);
-        timing = refined.timing.or(timing);
-        free_runs.extend(refined.free_run.map(|f| (report.estimator.clone(), f)));
-        estimates.push(report);
-    }
+    let Refined {
+        mut estimates,
+        free_runs,
+        noise_std,
+        timing,
+    } = refine_all(estimators, model, &data, &ls.report, settings)?;
     // Never a nonsense answer: the estimate asked for, or the best valid one.
     // A plugin's model that does not extend eq. 2.19 gets the finiteness and covariance
     // checks only.
@@ -313,31 +304,11 @@ pub fn identify_with(
         .collect();
     // 4. validate: free-run simulation per recording, as the chosen estimator fitted them.
     let free_run = free_runs.into_iter().find(|(e, _)| *e == estimator);
-    let (initial, offset, fitted): (_, _, Cow<'_, [Recording]>) = match free_run {
-        Some((_, f)) => (
-            f.initial.into_iter().map(Some).collect(),
-            f.offset,
-            Cow::Owned(f.recordings),
-        ),
-        None => (
-            vec![None; data.conditioned.len()],
-            None,
-            Cow::Borrowed(&*data.restamped),
-        ),
-    };
     let validation::Validation {
         files,
         series,
         channels,
-    } = validation::validate(
-        model,
-        &theta,
-        &data.conditioned,
-        &fitted,
-        initial,
-        offset,
-        &ls.quality,
-    )?;
+    } = validation::validate_free_run(model, &theta, &data, free_run.map(|(_, f)| f), &ls.quality)?;
     let (steady_theta4, steady_theta6) = steady_state(&data.conditioned, &theta);
     let dt = files.iter().map(|f| f.dt).fold(f64::INFINITY, f64::min);
     if eq_2_19 {
@@ -369,6 +340,50 @@ pub fn identify_with(
         regressions: ls.regressions,
         timing,
     })
+}
+
+/// Every estimate of a run, least squares' first, with what the refining estimators add.
+struct Refined {
+    estimates: Vec<EstimateReport>,
+    /// Each refining estimator's free run (its name with it), when it gave one.
+    free_runs: Vec<(String, wheelid_core::FreeRun)>,
+    /// Output error's residual standard deviations, when it ran.
+    noise_std: Option<Vec<f64>>,
+    /// The stamping convention output error used, when it ran.
+    timing: Option<TimingReport>,
+}
+
+/// Runs the refining estimators asked for (`settings.estimator`, or all with
+/// `settings.compare`) from least squares' answer `ls`.
+///
+/// # Errors
+/// As [`estimators::refine`].
+fn refine_all(
+    estimators: &[Box<dyn Estimator>],
+    model: &dyn RegressorModel,
+    data: &prepare::Prepared<'_>,
+    ls: &EstimateReport,
+    settings: &IdentifySettings,
+) -> Result<Refined, IdentifyError> {
+    let mut out = Refined {
+        estimates: vec![ls.clone()],
+        free_runs: Vec::new(),
+        noise_std: None,
+        timing: None,
+    };
+    for estimator in estimators {
+        if estimator.name() != settings.estimator && !settings.compare {
+            continue;
+        }
+        let (report, refined) =
+            estimators::refine(estimator.as_ref(), model, data, &ls.theta, settings)?;
+        out.noise_std = refined.noise_std.or(out.noise_std);
+        out.timing = refined.timing.or(out.timing);
+        out.free_runs
+            .extend(refined.free_run.map(|f| (report.estimator.clone(), f)));
+        out.estimates.push(report);
+    }
+    Ok(out)
 }
 
 /// `name` is least squares or one of `estimators`.

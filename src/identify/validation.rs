@@ -6,6 +6,7 @@ use wheelid_core::{
 };
 use wheelid_models::CommandOffset;
 
+use super::prepare::Prepared;
 use super::{ChannelReport, FileReport, FileSeries, IdentifyError};
 
 /// The validation's outcome: per file, its series, and per channel over all files.
@@ -15,6 +16,41 @@ pub(super) struct Validation {
     pub channels: Vec<ChannelReport>,
 }
 
+/// [`validate`] of `theta` on the prepared recordings, as the chosen estimator's `free_run`
+/// fitted them (its recordings, initial states and timing offset) when it gave one, else
+/// from the smoothed first samples of the recordings as stamped.
+///
+/// # Errors
+/// As [`validate`].
+pub(super) fn validate_free_run(
+    model: &dyn RegressorModel,
+    theta: &[f64],
+    data: &Prepared<'_>,
+    free_run: Option<wheelid_core::FreeRun>,
+    quality: &[(f64, f64, usize)],
+) -> Result<Validation, IdentifyError> {
+    match free_run {
+        Some(f) => validate(
+            model,
+            theta,
+            &data.conditioned,
+            &f.recordings,
+            f.initial.into_iter().map(Some).collect(),
+            f.offset,
+            quality,
+        ),
+        None => validate(
+            model,
+            theta,
+            &data.conditioned,
+            &data.restamped,
+            vec![None; data.conditioned.len()],
+            None,
+            quality,
+        ),
+    }
+}
+
 /// Simulates `theta` on `recordings` (one per conditioned recording `conditioned`), from the
 /// estimated `initial` states when the estimator gave them (else the smoothed first samples),
 /// with the timing `offset` when one was fitted; `quality` is least squares' (R², condition
@@ -22,7 +58,7 @@ pub(super) struct Validation {
 ///
 /// # Errors
 /// [`IdentifyError::Core`] when a simulation or the smoothing fails.
-pub(super) fn validate(
+fn validate(
     model: &dyn RegressorModel,
     theta: &[f64],
     conditioned: &[Conditioned<'_>],
