@@ -316,6 +316,39 @@ impl<M: DynamicModel + ?Sized> Problem<'_, M> {
         }
         Some(out)
     }
+    /// The weighted residual rows of `raw` (per recording and channel, every sample): the
+    /// cost's rows in order.
+    fn weighted_rows(&self, raw: &[Vec<Vec<f64>>]) -> DVector<f64> {
+        let s = self.nch();
+        let mut e = DVector::zeros(self.rows);
+        for (r, per) in raw.iter().enumerate() {
+            for (c, ec) in per.iter().enumerate() {
+                for (i, &k) in self.index[r].iter().enumerate() {
+                    e[self.offsets[r] + i * s + c] = self.weight[c] * ec[k];
+                }
+            }
+        }
+        e
+    }
+    /// Runs of consecutive samples in the cost, as (first row, samples): the lags of the
+    /// long-run covariance stay inside them.
+    fn spans(&self) -> Vec<(usize, usize)> {
+        let s = self.nch();
+        let mut spans: Vec<(usize, usize)> = Vec::new();
+        for (&o, ix) in self.offsets.iter().zip(&self.index) {
+            for (i, &k) in ix.iter().enumerate() {
+                match spans.last_mut() {
+                    Some((start, n))
+                        if i > 0 && ix[i - 1] + 1 == k && *start + *n * s == o + i * s =>
+                    {
+                        *n += 1
+                    }
+                    _ => spans.push((o + i * s, 1)),
+                }
+            }
+        }
+        spans
+    }
     /// ∂ŷ/∂θ and ∂ŷ/∂x0 of recording `r` (per channel n × p and n × s), the model's own
     /// when it has them (used as returned, not copied), else by differences.
     fn sensitivities(
@@ -560,13 +593,18 @@ impl OutputError {
         Some((problem.theta_of(&problem.u), evaluations))
     }
 
-    /// Checks the inputs of [`OutputError::fit`] and sets up its problem at `theta0`.
-    fn problem<'a, M: DynamicModel + ?Sized>(
+    /// The model's channels, θ0's length, the recordings' lengths and the bounds, checked; the
+    /// bounds (±∞ where none).
+    ///
+    /// # Errors
+    /// [`SolveError::InvalidProblem`] or, for a bound pair out of order,
+    /// [`SolveError::Infeasible`].
+    fn checked_bounds<M: DynamicModel + ?Sized>(
         &self,
-        model: &'a M,
-        recordings: &'a [Recording],
+        model: &M,
+        recordings: &[Recording],
         theta0: &[f64],
-    ) -> Result<Problem<'a, M>, SolveError> {
+    ) -> Result<Vec<(f64, f64)>, SolveError> {
         let p = model.params().len();
         let s = model.channels().len();
         if s != 2 {
@@ -610,13 +648,15 @@ impl OutputError {
                 )));
             }
         }
-        let transform: Vec<Transform> = bounds.iter().map(|&b| Transform::new(b)).collect();
-        let unknowns = p + if self.estimate_initial {
-            s * recordings.len()
-        } else {
-            0
-        };
-        let mask: Vec<Vec<bool>> = match &self.mask {
+        Ok(bounds)
+    }
+
+    /// The samples in the cost per recording: the mask's, else every one.
+    ///
+    /// # Errors
+    /// [`SolveError::InvalidProblem`] for a mask that does not match the recordings.
+    fn sample_mask(&self, recordings: &[Recording]) -> Result<Vec<Vec<bool>>, SolveError> {
+        Ok(match &self.mask {
             Some(m) => {
                 if m.len() != recordings.len()
                     || m.iter().zip(recordings).any(|(m, r)| m.len() != r.len())
@@ -628,7 +668,38 @@ impl OutputError {
                 m.clone()
             }
             None => recordings.iter().map(|r| vec![true; r.len()]).collect(),
+        })
+    }
+
+    /// The unknowns' names: θ's, then each recording's initial state when it is estimated.
+    fn unknown_names<M: DynamicModel + ?Sized>(&self, model: &M, recordings: usize) -> Vec<String> {
+        let mut names: Vec<String> = model.params().iter().map(|q| q.name.to_owned()).collect();
+        if self.estimate_initial {
+            for r in 0..recordings {
+                for c in model.channels() {
+                    names.push(format!("{}0 of recording {}", c.name, r + 1));
+                }
+            }
+        }
+        names
+    }
+
+    /// Checks the inputs of [`OutputError::fit`] and sets up its problem at `theta0`.
+    fn problem<'a, M: DynamicModel + ?Sized>(
+        &self,
+        model: &'a M,
+        recordings: &'a [Recording],
+        theta0: &[f64],
+    ) -> Result<Problem<'a, M>, SolveError> {
+        let (p, s) = (model.params().len(), model.channels().len());
+        let bounds = self.checked_bounds(model, recordings, theta0)?;
+        let transform: Vec<Transform> = bounds.iter().map(|&b| Transform::new(b)).collect();
+        let unknowns = p + if self.estimate_initial {
+            s * recordings.len()
+        } else {
+            0
         };
+        let mask = self.sample_mask(recordings)?;
         // Only the residuals that count are rows of the problem.
         let index: Vec<Vec<usize>> = mask
             .iter()
@@ -770,26 +841,12 @@ impl OutputError {
                 .jacobian_theta(&u)
                 .ok_or_else(|| SolveError::Numerical("non-finite sensitivities at θ̂".into()))?,
         };
-        let mut e = DVector::zeros(rows);
-        for (r, per) in raw.iter().enumerate() {
-            for (c, ec) in per.iter().enumerate() {
-                for (i, &k) in problem.index[r].iter().enumerate() {
-                    e[problem.offsets[r] + i * s + c] = problem.weight[c] * ec[k];
-                }
-            }
-        }
+        let e = problem.weighted_rows(raw);
         let longest = recordings.iter().map(Recording::len).max().unwrap_or(0);
         let lags = self
             .correlation_lags
             .unwrap_or_else(|| (4.0 * (longest as f64 / 100.0).powf(2.0 / 9.0)).floor() as usize);
-        let mut names: Vec<String> = model.params().iter().map(|q| q.name.to_owned()).collect();
-        if self.estimate_initial {
-            for r in 0..recordings.len() {
-                for c in model.channels() {
-                    names.push(format!("{}0 of recording {}", c.name, r + 1));
-                }
-            }
-        }
+        let names = self.unknown_names(model, recordings.len());
         // Parameters pinned on a bound (decided in u, where the transform is flat) take no part
         // in the covariance: their columns are dropped and their standard error is 0.
         let bound_state: Vec<BoundState> = problem
@@ -811,21 +868,7 @@ impl OutputError {
             correlation_lags: 0,
         };
         let d = ols::decompose(&lp, 1e-12)?;
-        // Runs of consecutive samples: the lags of the long-run covariance stay inside them.
-        let mut spans: Vec<(usize, usize)> = Vec::new();
-        for (&o, ix) in problem.offsets.iter().zip(&problem.index) {
-            for (i, &k) in ix.iter().enumerate() {
-                match spans.last_mut() {
-                    Some((start, n))
-                        if i > 0 && ix[i - 1] + 1 == k && *start + *n * s == o + i * s =>
-                    {
-                        *n += 1
-                    }
-                    _ => spans.push((o + i * s, 1)),
-                }
-            }
-        }
-        let full = sandwich(&d, &jac_free, &e, &spans, s, lags, active);
+        let full = sandwich(&d, &jac_free, &e, &problem.spans(), s, lags, active);
         let mut covariance = DMatrix::zeros(p, p);
         for (a, &i) in keep.iter().enumerate().filter(|(_, i)| **i < p) {
             for (b, &j) in keep.iter().enumerate().filter(|(_, j)| **j < p) {
