@@ -121,19 +121,9 @@ pub(super) fn fit_candidate(
         Ok(r) => r,
         // Both channels cannot be told apart (one never acts): each alone, the better kept.
         Err(first) if two && both_free => {
-            let mut best: Option<(PinnedFit, Vec<usize>)> = None;
-            for j in 0..2 {
-                let mut p = pinned.clone();
-                p.push(base + j);
-                let mut th = theta.clone();
-                th[base + j] = c.effect().null(&cur.theta, 0.0)[j];
-                if let Ok(r) = run(&th, &p)
-                    && best.as_ref().is_none_or(|b| cost(&r) < cost(&b.0))
-                {
-                    best = Some((r, p));
-                }
-            }
-            let (r, p) = best.ok_or(first)?;
+            let null = c.effect().null(&cur.theta, 0.0);
+            let (r, p) =
+                each_channel_alone(&run, &cost, &theta, &pinned, base, &null).ok_or(first)?;
             pinned = p;
             r
         }
@@ -141,6 +131,7 @@ pub(super) fn fit_candidate(
     };
     let mut time_resolution = 0.0;
     if search == Search::ChangeTime {
+        // The change time's cost is flat between samples: its minimum's middle, refitted.
         let step = (t_hi - t_lo) / (nominee.pattern.grid + 1) as f64;
         let t0 = full[base];
         let (lo, hi) = flat_minimum(
@@ -153,10 +144,9 @@ pub(super) fn fit_candidate(
             },
         );
         time_resolution = 0.5 * (hi - lo) + step / 32.0;
-        let t_best = 0.5 * (lo + hi);
-        if (t_best - t0).abs() > 1e-9 {
+        if (0.5 * (lo + hi) - t0).abs() > 1e-9 {
             let mut th = full.clone();
-            th[base] = t_best;
+            th[base] = 0.5 * (lo + hi);
             (fit, full, free) = run(&th, &pinned)?;
         }
     }
@@ -179,6 +169,35 @@ pub(super) fn fit_candidate(
         new.std_err[base] = time_resolution;
     }
     Ok((new, fit))
+}
+
+/// A fit from θ with the given parameters pinned, or why it failed.
+type FitFrom<'a> = dyn Fn(&[f64], &[usize]) -> std::result::Result<PinnedFit, String> + 'a;
+
+/// A two-channel candidate whose channels cannot be told apart (one never acts): fitted with
+/// each channel alone (the other pinned at its `null` value), the cheaper fit kept with its
+/// pinned parameters; `None` if both fail.
+fn each_channel_alone(
+    run: &FitFrom<'_>,
+    cost: &dyn Fn(&PinnedFit) -> f64,
+    theta: &[f64],
+    pinned: &[usize],
+    base: usize,
+    null: &[f64],
+) -> Option<(PinnedFit, Vec<usize>)> {
+    let mut best: Option<(PinnedFit, Vec<usize>)> = None;
+    for j in 0..2 {
+        let mut p = pinned.to_vec();
+        p.push(base + j);
+        let mut th = theta.to_vec();
+        th[base + j] = null[j];
+        if let Ok(r) = run(&th, &p)
+            && best.as_ref().is_none_or(|b| cost(&r) < cost(&b.0))
+        {
+            best = Some((r, p));
+        }
+    }
+    best
 }
 
 /// A rate limit the nominal model lacks is traded for a slower lag (θ1, θ2 too large, a limit

@@ -202,7 +202,6 @@ pub(crate) fn locate(
             .copied()
             .unwrap_or(0.0)
     });
-    type Region<'a> = (&'a str, Box<dyn Fn(usize) -> bool + 'a>);
     let regions: Vec<Region<'_>> = vec![
         ("v > 0", Box::new(|k| v[k] > 0.0)),
         ("v < 0", Box::new(|k| v[k] < 0.0)),
@@ -229,28 +228,6 @@ pub(crate) fn locate(
                 .iter()
                 .map(|u| residual::independence(&e, u, max_lag))
                 .collect();
-            let (pe, py) = (band_power(&e, dt), band_power(y, dt));
-            let total: f64 = pe.iter().sum::<f64>().max(1e-300);
-            let bands = (0..BANDS.len())
-                .map(|b| Band {
-                    from_hz: BANDS[b],
-                    to_hz: BANDS.get(b + 1).copied().unwrap_or(0.5 / dt),
-                    residual_share: pe[b] / total,
-                    error_to_signal: pe[b] / py[b].max(1e-300),
-                })
-                .collect();
-            let mut shares: Vec<Share> = regions
-                .iter()
-                .filter_map(|(name, f)| {
-                    let idx: Vec<usize> = (0..n).filter(|&k| f(k)).collect();
-                    (idx.len() >= 10 && all > 0.0).then(|| Share {
-                        name: (*name).into(),
-                        fraction: idx.len() as f64 / n as f64,
-                        rms_ratio: rms(idx.iter().map(|&k| e[k])) / all,
-                    })
-                })
-                .collect();
-            shares.sort_by(|a, b| b.rms_ratio.total_cmp(&a.rms_ratio));
             ChannelLocation {
                 channel: ["v", "w"][c].into(),
                 rms: all,
@@ -260,8 +237,8 @@ pub(crate) fn locate(
                     .map(|t| t.peak_lag as f64 * dt)
                     .collect(),
                 independence,
-                bands,
-                regions: shares,
+                bands: bands(&e, y, dt),
+                regions: shares(&regions, &e, n, all),
                 windows: windows(recs, sim, keep, c, all, dt),
             }
         })
@@ -271,6 +248,42 @@ pub(crate) fn locate(
         dt,
         channels,
     }
+}
+
+/// A region of the operating space: its name and which samples are in it.
+type Region<'a> = (&'a str, Box<dyn Fn(usize) -> bool + 'a>);
+
+/// The residual `e`'s share of its power in each of [`BANDS`], and its power over the
+/// measured signal `y`'s there (periodograms at sample period `dt` [s]).
+fn bands(e: &[f64], y: &[f64], dt: f64) -> Vec<Band> {
+    let (pe, py) = (band_power(e, dt), band_power(y, dt));
+    let total: f64 = pe.iter().sum::<f64>().max(1e-300);
+    (0..BANDS.len())
+        .map(|b| Band {
+            from_hz: BANDS[b],
+            to_hz: BANDS.get(b + 1).copied().unwrap_or(0.5 / dt),
+            residual_share: pe[b] / total,
+            error_to_signal: pe[b] / py[b].max(1e-300),
+        })
+        .collect()
+}
+
+/// The residual `e`'s RMS in each region with at least 10 of the `n` samples, over its RMS
+/// `all` everywhere, largest first.
+fn shares(regions: &[Region<'_>], e: &[f64], n: usize, all: f64) -> Vec<Share> {
+    let mut shares: Vec<Share> = regions
+        .iter()
+        .filter_map(|(name, f)| {
+            let idx: Vec<usize> = (0..n).filter(|&k| f(k)).collect();
+            (idx.len() >= 10 && all > 0.0).then(|| Share {
+                name: (*name).into(),
+                fraction: idx.len() as f64 / n as f64,
+                rms_ratio: rms(idx.iter().map(|&k| e[k])) / all,
+            })
+        })
+        .collect();
+    shares.sort_by(|a, b| b.rms_ratio.total_cmp(&a.rms_ratio));
+    shares
 }
 
 /// The (at most three) windows of the kept samples where channel `c`'s residual RMS is at
