@@ -273,6 +273,45 @@ struct Messages {
     command_type: CommandType,
 }
 
+/// No message on `topic` of the bag `file_name`, whose topics `present` (with their schemas)
+/// the error lists.
+fn missing_topic(file_name: &str, topic: &str, present: &BTreeMap<String, String>) -> RobotError {
+    let list: Vec<String> = present.iter().map(|(t, s)| format!("{t} ({s})")).collect();
+    let list = if list.is_empty() {
+        "none".to_owned()
+    } else {
+        list.join(", ")
+    };
+    RobotError::Setting(format!(
+        "{file_name}: no messages on topic `{topic}`; topics present: {list}"
+    ))
+}
+
+/// The odometry messages of `topic`, in time order, each at its own time.
+///
+/// # Errors
+/// [`RobotError::Protocol`] naming the first two samples with the same time.
+fn distinct_times(
+    file_name: &str,
+    topic: &str,
+    time_source: TimeSource,
+    odometry: &[Stamped<Odometry>],
+) -> Result<(), RobotError> {
+    let Some(k) = odometry.windows(2).position(|p| p[1].ns == p[0].ns) else {
+        return Ok(());
+    };
+    let hint = match time_source {
+        TimeSource::HeaderStamp => " (are the header stamps set?)",
+        TimeSource::LogTime => "",
+    };
+    Err(RobotError::Protocol(format!(
+        "{file_name}: topic `{topic}`: samples {k} and {} (in time order) have the same time \
+         {} s{hint}",
+        k + 1,
+        odometry[k].ns as f64 * 1e-9,
+    )))
+}
+
 impl Messages {
     /// Reads and decodes the odometry and command messages of the bag at `path`.
     fn read(path: &Path, topics: &BagTopics, time_source: TimeSource) -> Result<Self, RobotError> {
@@ -357,39 +396,16 @@ impl Messages {
                 }
             });
         }
-        let missing = |topic: &str| {
-            let list: Vec<String> = present.iter().map(|(t, s)| format!("{t} ({s})")).collect();
-            let list = if list.is_empty() {
-                "none".to_owned()
-            } else {
-                list.join(", ")
-            };
-            RobotError::Setting(format!(
-                "{file_name}: no messages on topic `{topic}`; topics present: {list}"
-            ))
-        };
         if odometry.is_empty() {
-            return Err(missing(&topics.odometry));
+            return Err(missing_topic(&file_name, &topics.odometry, &present));
         }
         let Some(command_type) = command_type else {
-            return Err(missing(&topics.command));
+            return Err(missing_topic(&file_name, &topics.command, &present));
         };
         // Stable sorts: equal times keep file order.
         odometry.sort_by_key(|s| s.ns);
         commands.sort_by_key(|s| s.ns);
-        if let Some(k) = odometry.windows(2).position(|p| p[1].ns == p[0].ns) {
-            let hint = match time_source {
-                TimeSource::HeaderStamp => " (are the header stamps set?)",
-                TimeSource::LogTime => "",
-            };
-            return Err(RobotError::Protocol(format!(
-                "{file_name}: topic `{}`: samples {k} and {} (in time order) have the same time \
-                 {} s{hint}",
-                topics.odometry,
-                k + 1,
-                odometry[k].ns as f64 * 1e-9,
-            )));
-        }
+        distinct_times(&file_name, &topics.odometry, time_source, &odometry)?;
         Ok(Self {
             odometry,
             commands,
