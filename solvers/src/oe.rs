@@ -235,7 +235,14 @@ struct Problem<'a, M: ?Sized> {
     /// The simulations of the last residual evaluation and the u they were run at: the base of
     /// the next forward-difference Jacobian, which Levenberg–Marquardt asks for at that u.
     last_simulation: RefCell<Option<(na::DVector<f64>, Vec<Simulation>)>>,
+    /// The last raw residuals and the u they were taken at: the minimiser asks again for the
+    /// residuals at the u the fit starts from and at the one it ends at (a whole simulation
+    /// each); taken by the repeated request.
+    last_raw: RefCell<Option<Residuals>>,
 }
+
+/// Raw residuals (per recording and channel, every sample) and the u they were taken at.
+type Residuals = (na::DVector<f64>, Vec<Vec<Vec<f64>>>);
 
 /// A minimisation's end: the problem at θ̂, its raw residuals (per recording and channel),
 /// the residual evaluations, and how the last pass ended.
@@ -293,6 +300,12 @@ impl<M: DynamicModel + ?Sized> Problem<'_, M> {
     /// Unweighted residuals y − ŷ per recording and channel, or `None` if a simulation failed
     /// or diverged.
     fn raw_residuals(&self, theta: &[f64], u: &na::DVector<f64>) -> Option<Vec<Vec<Vec<f64>>>> {
+        // Asked again at the same u (taken: a third time simulates again).
+        if let Some((at, raw)) = self.last_raw.take()
+            && at == *u
+        {
+            return Some(raw);
+        }
         let mut out = Vec::with_capacity(self.recs.len());
         let mut sims = Vec::with_capacity(self.recs.len());
         for (r, rec) in self.recs.iter().enumerate() {
@@ -314,6 +327,7 @@ impl<M: DynamicModel + ?Sized> Problem<'_, M> {
         if self.forward {
             self.last_simulation.replace(Some((u.clone(), sims)));
         }
+        self.last_raw.replace(Some((u.clone(), out.clone())));
         Some(out)
     }
     /// The weighted residual rows of `raw` (per recording and channel, every sample): the
@@ -440,6 +454,8 @@ impl<M: DynamicModel + ?Sized> Problem<'_, M> {
             .as_ref()
             .map_or(s * self.recs.len(), |_| 0);
         let theta = self.theta_of(u);
+        // The residuals are not asked for again at a Jacobian's u (not held through its peak).
+        self.last_raw.replace(None);
         let mut jac = DMatrix::zeros(self.rows, cols);
         let mut cached = match self.last_simulation.take() {
             Some((at, sims)) if at == *u => sims.into_iter().map(Some).collect(),
@@ -739,6 +755,7 @@ impl OutputError {
             rows,
             last_jacobian: RefCell::new(None),
             last_simulation: RefCell::new(None),
+            last_raw: RefCell::new(None),
         })
     }
 
