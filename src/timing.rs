@@ -161,32 +161,8 @@ fn fit_from(
     oe: &OutputError,
     dt: f64,
 ) -> Result<TimedFit, SolveError> {
-    let stated: Vec<Option<Timing>> = recordings.iter().map(Recording::timing).collect();
-    if let Some(first) = stated.first().copied().flatten()
-        && stated.iter().all(Option::is_some)
-    {
-        let fit = without_first_windows(oe, recordings).fit(model, recordings, theta0)?;
-        let same = stated.iter().all(|s| *s == Some(first));
-        let timing = TimingReport {
-            source: TimingSource::Stated,
-            stated: same.then_some(first),
-            sampling: first.velocity_sampling(),
-            offset_s: 0.0,
-            offset_std_s: 0.0,
-            period_s: dt,
-            hypotheses: Vec::new(),
-            likely: same.then_some(first),
-            summary: format!(
-                "timing: stated ({}), used as stated",
-                if same { first.name() } else { "per recording" }
-            ),
-        };
-        return Ok(TimedFit {
-            fit,
-            recordings: recordings.to_vec(),
-            timing,
-            offset: None,
-        });
+    if let Some(fit) = fit_as_stated(model, recordings, theta0, oe, dt) {
+        return fit;
     }
     let params = CommandOffset::params_of(model);
     let wrapped = CommandOffset::new(model, &params)
@@ -201,6 +177,95 @@ fn fit_from(
         ..oe.clone()
     };
     // 1. Each convention as a hypothesis, its offset pinned at zero: the likeliest wins.
+    let (pinned, recs, h, hypotheses) = likeliest_convention(model, recordings, theta0, oe)?;
+    // 2. A residual offset under the winner, used only where it is one.
+    let mut start = pinned.theta.clone();
+    start.push(0.0);
+    let free = without_first_windows(&oe7, &recs)
+        .fit(&wrapped, &recs, &start)
+        .ok();
+    let residual = free.as_ref().map(|f| {
+        let last = f.theta.len() - 1;
+        (f.theta[last], f.std_err[last])
+    });
+    let real = residual.is_some_and(|(d, sd)| d.abs() > (3.0 * sd).max(MIN_OFFSET_SAMPLES * dt));
+    let timing = estimated_report(h, residual, real, dt, hypotheses);
+    match (real, free) {
+        (true, Some(fit)) => {
+            let offset = residual.map(|(d, _)| d);
+            Ok(TimedFit {
+                fit,
+                recordings: recs,
+                timing,
+                offset,
+            })
+        }
+        _ => Ok(TimedFit {
+            fit: pinned,
+            recordings: recs,
+            timing,
+            offset: None,
+        }),
+    }
+}
+
+/// The fit under the conventions the recordings state, when every one states one (`None`
+/// otherwise: the convention is then estimated).
+fn fit_as_stated(
+    model: &dyn DynamicModel,
+    recordings: &[Recording],
+    theta0: &[f64],
+    oe: &OutputError,
+    dt: f64,
+) -> Option<Result<TimedFit, SolveError>> {
+    let stated: Vec<Option<Timing>> = recordings.iter().map(Recording::timing).collect();
+    let first = stated.first().copied().flatten()?;
+    if !stated.iter().all(Option::is_some) {
+        return None;
+    }
+    let fit = match without_first_windows(oe, recordings).fit(model, recordings, theta0) {
+        Ok(fit) => fit,
+        Err(e) => return Some(Err(e)),
+    };
+    let same = stated.iter().all(|s| *s == Some(first));
+    let timing = TimingReport {
+        source: TimingSource::Stated,
+        stated: same.then_some(first),
+        sampling: first.velocity_sampling(),
+        offset_s: 0.0,
+        offset_std_s: 0.0,
+        period_s: dt,
+        hypotheses: Vec::new(),
+        likely: same.then_some(first),
+        summary: format!(
+            "timing: stated ({}), used as stated",
+            if same { first.name() } else { "per recording" }
+        ),
+    };
+    Some(Ok(TimedFit {
+        fit,
+        recordings: recordings.to_vec(),
+        timing,
+        offset: None,
+    }))
+}
+
+/// The likeliest convention's fit, its recordings and the convention, and every hypothesis
+/// with its −2 log-likelihood.
+type Likeliest = (OutputErrorFit, Vec<Recording>, Timing, Vec<(Timing, f64)>);
+
+/// Each stamping convention as a hypothesis, its offset pinned at zero: the likeliest fit
+/// (instants must win by [`INSTANT_MARGIN`] per residual), its recordings and convention, and
+/// every hypothesis's −2 log-likelihood.
+///
+/// # Errors
+/// The first hypothesis's error when none could be fitted.
+fn likeliest_convention(
+    model: &dyn DynamicModel,
+    recordings: &[Recording],
+    theta0: &[f64],
+    oe: &OutputError,
+) -> Result<Likeliest, SolveError> {
     let mut best: Option<(f64, OutputErrorFit, Vec<Recording>, Timing)> = None;
     let mut hypotheses = Vec::new();
     let mut first_err = None;
@@ -231,35 +296,7 @@ fn fit_from(
             SolveError::InvalidProblem("no timing hypothesis could be fitted".into())
         }));
     };
-    // 2. A residual offset under the winner, used only where it is one.
-    let mut start = pinned.theta.clone();
-    start.push(0.0);
-    let free = without_first_windows(&oe7, &recs)
-        .fit(&wrapped, &recs, &start)
-        .ok();
-    let residual = free.as_ref().map(|f| {
-        let last = f.theta.len() - 1;
-        (f.theta[last], f.std_err[last])
-    });
-    let real = residual.is_some_and(|(d, sd)| d.abs() > (3.0 * sd).max(MIN_OFFSET_SAMPLES * dt));
-    let timing = estimated_report(h, residual, real, dt, hypotheses);
-    match (real, free) {
-        (true, Some(fit)) => {
-            let offset = residual.map(|(d, _)| d);
-            Ok(TimedFit {
-                fit,
-                recordings: recs,
-                timing,
-                offset,
-            })
-        }
-        _ => Ok(TimedFit {
-            fit: pinned,
-            recordings: recs,
-            timing,
-            offset: None,
-        }),
-    }
+    Ok((pinned, recs, h, hypotheses))
 }
 
 /// The recordings read under convention `h`: those that state theirs keep it; the others get

@@ -66,23 +66,7 @@ impl Solver for BoxLs {
     fn solve(&self, p: &LinearProblem<'_>) -> Result<LinearFit, SolveError> {
         check_problem(p)?;
         let (n, k) = p.x.shape();
-        let bounds: Vec<(f64, f64)> = match p.bounds {
-            Some(b) if b.len() == k => b.to_vec(),
-            Some(b) => {
-                return Err(SolveError::InvalidProblem(format!(
-                    "{k} parameters but {} bounds",
-                    b.len()
-                )));
-            }
-            None => vec![(f64::NEG_INFINITY, f64::INFINITY); k],
-        };
-        for ((lo, hi), name) in bounds.iter().zip(p.names) {
-            if lo.is_nan() || hi.is_nan() || lo > hi {
-                return Err(SolveError::Infeasible(format!(
-                    "{name}: lower {lo} > upper {hi}"
-                )));
-            }
-        }
+        let bounds = checked_bounds(p)?;
         let d = decompose(p, self.rank_tol)?;
         // Scaled variables β = D θ, so X θ = X̃ β.
         let mut xs = p.x.clone();
@@ -164,6 +148,33 @@ impl Solver for BoxLs {
             status,
         })
     }
+}
+
+/// The problem's bounds, one (lower, upper) pair per column (±∞ where none).
+///
+/// # Errors
+/// [`SolveError::InvalidProblem`] for a count that does not match the columns;
+/// [`SolveError::Infeasible`] for a pair out of order or NaN.
+fn checked_bounds(p: &LinearProblem<'_>) -> Result<Vec<(f64, f64)>, SolveError> {
+    let k = p.x.ncols();
+    let bounds: Vec<(f64, f64)> = match p.bounds {
+        Some(b) if b.len() == k => b.to_vec(),
+        Some(b) => {
+            return Err(SolveError::InvalidProblem(format!(
+                "{k} parameters but {} bounds",
+                b.len()
+            )));
+        }
+        None => vec![(f64::NEG_INFINITY, f64::INFINITY); k],
+    };
+    for ((lo, hi), name) in bounds.iter().zip(p.names) {
+        if lo.is_nan() || hi.is_nan() || lo > hi {
+            return Err(SolveError::Infeasible(format!(
+                "{name}: lower {lo} > upper {hi}"
+            )));
+        }
+    }
+    Ok(bounds)
 }
 
 #[cfg(test)]

@@ -51,14 +51,7 @@ pub(super) fn patterns(c: Candidate, data: &Data, cur: &Current) -> Option<Vec<P
             evidence,
             grid: 1,
         };
-    let probe_data = ProbeData {
-        recordings: &data.recs,
-        accel: &data.accel,
-        theta: th6,
-        dt: data.dt,
-        track: data.track,
-    };
-    match c.effect().probe(&probe_data)? {
+    match c.effect().probe(&data.probe_data(th6))? {
         Probe::Gradient(steps) => {
             let cols = steps
                 .iter()
@@ -92,7 +85,7 @@ pub(super) fn patterns(c: Candidate, data: &Data, cur: &Current) -> Option<Vec<P
             }
             Some(out)
         }
-        // A grid of change times over the middle of the run, one thread per time.
+        // A grid of change times over the middle of the run.
         Probe::TimeGrid { time, n, columns } => {
             let pattern_at = |g: usize| {
                 let ts = t_lo + (t_hi - t_lo) * g as f64 / (n + 1) as f64;
@@ -112,18 +105,17 @@ pub(super) fn patterns(c: Candidate, data: &Data, cur: &Current) -> Option<Vec<P
                 p.grid = n;
                 Some(p)
             };
-            std::thread::scope(|scope| {
-                let handles: Vec<_> = (1..=n)
-                    .map(|g| {
-                        let pattern_at = &pattern_at;
-                        scope.spawn(move || pattern_at(g))
-                    })
-                    .collect();
-                handles
-                    .into_iter()
-                    .map(|h| h.join().ok().flatten())
-                    .collect::<Option<Vec<_>>>()
-            })
+            // On the pool's threads; a time whose simulation panics is no pattern (as before on
+            // a thread of its own).
+            use rayon::prelude::*;
+            (1..=n)
+                .into_par_iter()
+                .map(|g| {
+                    std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| pattern_at(g)))
+                        .ok()
+                        .flatten()
+                })
+                .collect::<Option<Vec<_>>>()
         }
     }
 }

@@ -172,6 +172,18 @@ pub(super) fn track_from_meta(rec: &Recording) -> Option<f64> {
 }
 
 impl Data {
+    /// What an effect's probe reads of the data ([`wheelid_core::effect::Effect::probe`]), at
+    /// the nominal θ `th6`.
+    pub(super) fn probe_data<'a>(&'a self, th6: &'a [f64]) -> ProbeData<'a> {
+        ProbeData {
+            recordings: &self.recs,
+            accel: &self.accel,
+            theta: th6,
+            dt: self.dt,
+            track: self.track,
+        }
+    }
+
     /// The report's view of a model in hand: its name, θ, validation fits and cost.
     pub(super) fn stage(&self, cur: &Current) -> Stage {
         let (channels, validation_cost) = self.validate(&cur.sim);

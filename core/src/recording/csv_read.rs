@@ -148,17 +148,7 @@ pub(super) fn parse(
         .iter()
         .map(|h| h.trim().to_owned())
         .collect();
-    let find = |name: &str| headers.iter().position(|h| h == name);
-    let mut req_idx = [0usize; 5];
-    for (slot, name) in req_idx.iter_mut().zip(REQUIRED) {
-        *slot = find(name).ok_or_else(|| Error::MissingColumn {
-            file: source.clone(),
-            line: header_line,
-            column: name.into(),
-            header: headers.join(","),
-        })?;
-    }
-    let opt_idx: Vec<Option<usize>> = OPTIONAL.iter().map(|n| find(n)).collect();
+    let (req_idx, opt_idx) = column_indices(&headers, &source, header_line)?;
     let mut req: [Vec<f64>; 5] = Default::default();
     let mut opt: Vec<Option<Vec<f64>>> = opt_idx.iter().map(|i| i.map(|_| Vec::new())).collect();
     let mut record = csv::ByteRecord::new();
@@ -215,6 +205,29 @@ pub(super) fn parse(
         });
     }
     Ok(recording_of(source, meta, req, opt))
+}
+
+/// Where the [`REQUIRED`] columns (each) and the [`OPTIONAL`] ones (where present) are among
+/// `headers`, read on line `header_line` of `source`.
+///
+/// # Errors
+/// [`Error::MissingColumn`] for the first required column missing.
+fn column_indices(
+    headers: &[String],
+    source: &Path,
+    header_line: u64,
+) -> Result<([usize; 5], Vec<Option<usize>>)> {
+    let find = |name: &str| headers.iter().position(|h| h == name);
+    let mut req_idx = [0usize; 5];
+    for (slot, name) in req_idx.iter_mut().zip(REQUIRED) {
+        *slot = find(name).ok_or_else(|| Error::MissingColumn {
+            file: source.to_owned(),
+            line: header_line,
+            column: name.into(),
+            header: headers.join(","),
+        })?;
+    }
+    Ok((req_idx, OPTIONAL.iter().map(|n| find(n)).collect()))
 }
 
 /// The recording of the five required columns (in [`REQUIRED`] order) and the optional ones
