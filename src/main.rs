@@ -1,22 +1,9 @@
 //! The `wheelid` command.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
-use wheelid::config::{
-    DiagnoseConfig, ExcitationConfig, SimulateConfig, TrackConfig, read_toml, read_toml_or_default,
-    robot_profile,
-};
-use wheelid::core::Columns;
-use wheelid::estimators;
-use wheelid::files::{ModelFile, read_bounds};
-use wheelid::identify::{IdentifySettings, identify_with};
-use wheelid::registry::Registry;
-use wheelid::robots::{
-    Excitation, RobotProfile, SimSettings, TrajectorySpec, simulate_recording, track, track_robot,
-};
-use wheelid::{core::Recording, models, report, solvers};
 
 /// `println!` that survives a closed pipe (`wheelid identify | head`): once standard output is
 /// gone, further output is dropped and the command still finishes its work (the files it

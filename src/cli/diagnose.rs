@@ -1,6 +1,16 @@
 //! `wheelid diagnose`: where a model and recordings disagree, and the physics left out.
 
-use crate::*;
+use std::path::{Path, PathBuf};
+
+use anyhow::Result;
+use wheelid::config::{DiagnoseConfig, read_toml_or_default};
+use wheelid::core::Columns;
+use wheelid::files::ModelFile;
+use wheelid::registry::Registry;
+use wheelid::robots::{Excitation, RobotProfile, SimSettings, simulate_recording};
+use wheelid::{core::Recording, models, report};
+
+use crate::{Bar, emit, list_plots};
 
 #[derive(clap::Args)]
 pub(crate) struct DiagnoseArgs {

@@ -1,6 +1,12 @@
 //! `wheelid export`: a model file for another stack (ROS 2, Nav2).
 
-use crate::*;
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use wheelid::files::ModelFile;
+use wheelid::robots::RobotProfile;
+
+use crate::emit;
 
 #[derive(clap::Args)]
 pub(crate) struct ExportArgs {

@@ -1,6 +1,17 @@
 //! `wheelid identify`: θ of eq. 2.19 from recordings, or from the built-in simulated Pioneer 3-DX.
 
-use crate::*;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use wheelid::core::Columns;
+use wheelid::estimators;
+use wheelid::files::{ModelFile, read_bounds};
+use wheelid::identify::{IdentifySettings, identify_with};
+use wheelid::registry::Registry;
+use wheelid::robots::{Excitation, RobotProfile, SimSettings, simulate_recording};
+use wheelid::{report, solvers};
+
+use crate::{emit, list_plots};
 
 #[derive(clap::Args)]
 pub(crate) struct IdentifyArgs {

@@ -1,6 +1,12 @@
 //! `wheelid migrate`: a tracking controller moved between robots and checked on the target.
 
-use crate::*;
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use wheelid::files::ModelFile;
+use wheelid::robots::RobotProfile;
+
+use crate::{emit, list_plots, physical_profile};
 
 #[derive(clap::Args)]
 pub(crate) struct MigrateArgs {

@@ -1,6 +1,11 @@
 //! `wheelid run`: a whole identification job from a TOML file.
 
-use crate::*;
+use std::path::PathBuf;
+
+use anyhow::Result;
+use wheelid::report;
+
+use crate::{Bar, emit};
 
 #[derive(clap::Args)]
 pub(crate) struct RunArgs {

@@ -1,6 +1,13 @@
 //! `wheelid simulate`: a recording from the simulator or the physics backend.
 
-use crate::*;
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use wheelid::config::{ExcitationConfig, SimulateConfig, read_toml, robot_profile};
+use wheelid::files::ModelFile;
+use wheelid::robots::{RobotProfile, simulate_recording};
+
+use crate::{emit, physical_profile};
 
 #[derive(clap::Args)]
 pub(crate) struct SimulateArgs {

@@ -1,6 +1,14 @@
 //! `wheelid track`: the figure eight with the adaptive inverse-dynamics controller.
 
-use crate::*;
+use std::path::PathBuf;
+
+use anyhow::{Result, bail};
+use wheelid::config::{TrackConfig, read_toml_or_default, robot_profile};
+use wheelid::files::ModelFile;
+use wheelid::report;
+use wheelid::robots::{RobotProfile, TrajectorySpec, track, track_robot};
+
+use crate::{emit, list_plots, physical_profile};
 
 #[derive(clap::Args)]
 pub(crate) struct TrackArgs {
