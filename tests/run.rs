@@ -34,10 +34,35 @@ fn assert_close(theta: &[f64], truth: &[f64], tol: f64, what: &str) {
 const PIONEER: [f64; 6] = [0.2604, 0.2509, -0.000499, 0.9965, 0.00263, 1.0768];
 const KHEPERA: [f64; 6] = [0.0228, 0.0568, -0.0001, 1.0030, 0.0732, 0.9981];
 
+/// An observer that keeps what the drive reported: (message, done, total) of each call.
+#[derive(Default)]
+struct Reports(Mutex<Vec<(String, u64, u64)>>);
+
+impl wheelid::observer::Observer for Reports {
+    fn progress(&self, message: &str, done: u64, total: u64) {
+        if let Ok(mut r) = self.0.lock() {
+            r.push((message.to_owned(), done, total));
+        }
+    }
+}
+
 #[test]
 fn the_simulator_config_identifies_the_pioneer_and_writes_every_output() {
-    let out = run(&config("run_simulator.toml"), &Silent).expect("runs");
+    let reports = Reports::default();
+    let out = run(&config("run_simulator.toml"), &reports).expect("runs");
     assert_eq!(out.recording.len(), 1500);
+    // The drive reported each sample to the observer, counting up to the 1,500 planned.
+    let reports = reports.0.into_inner().expect("reports");
+    assert_eq!(reports.len(), 1500);
+    assert!(
+        reports
+            .iter()
+            .all(|(m, _, total)| m == "driving" && *total == 1500)
+    );
+    assert_eq!(
+        reports.iter().map(|r| r.1).collect::<Vec<_>>(),
+        (1..=1500).collect::<Vec<u64>>()
+    );
     assert_eq!(
         out.recording.meta("velocity_sampling"),
         Some("window_average")
