@@ -121,7 +121,7 @@ pub struct RunSpec {
     pub effects: Vec<&'static str>,
     /// Seed of the excitation, the magnitudes and the simulation.
     pub seed: u64,
-    /// Duration [s].
+    /// Duration \[s\].
     pub duration_s: f64,
     /// Host timing jitter (fraction of the period).
     pub jitter: f64,
@@ -192,7 +192,7 @@ pub struct Record {
     pub case: String,
     /// Seed.
     pub seed: u64,
-    /// Duration [s].
+    /// Duration \[s\].
     pub duration_s: f64,
     /// Jitter.
     pub jitter: f64,
@@ -228,9 +228,9 @@ pub struct Record {
     /// The chassis moved far faster than its wheels ever turned (pose speed > 1.5 × the
     /// encoders' largest |v| + 5 % of v_max): the backend did not realise the effect physically.
     pub unphysical: bool,
-    /// Simulation wall time [s].
+    /// Simulation wall time \[s\].
     pub simulate_s: f64,
-    /// Diagnosis wall time [s].
+    /// Diagnosis wall time \[s\].
     pub diagnose_s: f64,
     /// The error, if the run failed (then nothing else is meaningful).
     pub error: Option<String>,
@@ -273,7 +273,7 @@ pub struct Demand {
     pub slope_v: Vec<f64>,
     /// |Δω_ref|/Δ per period [rad/s²].
     pub slope_w: Vec<f64>,
-    /// Peak |voltage| over both wheels per period [V].
+    /// Peak |voltage| over both wheels per period \[V\].
     pub volts: Vec<f64>,
     /// Peak friction coefficient needed over both wheels per period [-].
     pub mu: Vec<f64>,
@@ -1245,7 +1245,7 @@ pub struct Args {
     /// Only these physics effects in the single and pair cases (default: all of TRUTH).
     #[arg(long)]
     pub effects: Option<String>,
-    /// Duration [s] for every profile (default: 60 for khepera3, 120 otherwise).
+    /// Duration \[s\] for every profile (default: 60 for khepera3, 120 otherwise).
     #[arg(long)]
     pub duration: Option<f64>,
     /// Host timing jitter, fraction of the period (< 0.5).

@@ -53,7 +53,7 @@ pub enum ExcitationConfig {
         v_amp: f64,
         /// ω_ref peak [rad/s].
         w_amp: f64,
-        /// Highest line [Hz].
+        /// Highest line \[Hz\].
         f_max_hz: f64,
     },
     /// Any pair of signals ([`wheelid_robots::Signal`]).
@@ -215,13 +215,13 @@ pub struct DiagnoseConfig {
     pub blocks: Option<usize>,
     /// Family-wise level of the tests.
     pub alpha: Option<f64>,
-    /// Largest correlation lag [s].
+    /// Largest correlation lag \[s\].
     pub max_lag_s: Option<f64>,
     /// Smallest relative drop of the validation cost that counts.
     pub min_improvement: Option<f64>,
     /// Most effects added.
     pub max_effects: Option<usize>,
-    /// Wheel track [m].
+    /// Wheel track \[m\].
     pub track_m: Option<f64>,
     /// Directory for the plots.
     pub plot: Option<PathBuf>,

@@ -14,7 +14,7 @@
 //! Limits: a diagnosed `velocity_saturation` (`v_max`, `w_max`) or the built-in profile's top
 //! speeds; accelerations only from a diagnosed `acceleration_limit` (an acceleration not
 //! measured is not written). The response lag: the time constants θ1/θ4 and θ2/θ6 of eq. 2.19
-//! [s] and a diagnosed `input_delay` [s], under `wheelid_response` (not read by either node).
+//! \[s\] and a diagnosed `input_delay` \[s\], under `wheelid_response` (not read by either node).
 
 use std::fmt::Write as _;
 

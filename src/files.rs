@@ -100,7 +100,7 @@ pub struct ModelFile {
     pub theta: Vec<f64>,
     /// Standard errors.
     pub std_err: Vec<f64>,
-    /// Cut-off used [Hz].
+    /// Cut-off used \[Hz\].
     pub cutoff_hz: f64,
     /// Samples used.
     pub samples: usize,

@@ -109,7 +109,7 @@ pub struct EstimateReport {
     pub invalid: Option<String>,
     /// Iterations (IV) or residual evaluations (OE); 1 for least squares.
     pub iterations: usize,
-    /// Wall time [s].
+    /// Wall time \[s\].
     pub seconds: f64,
 }
 
@@ -120,9 +120,9 @@ pub struct FileReport {
     pub source: PathBuf,
     /// Samples used (after resampling).
     pub samples: usize,
-    /// Sample period [s].
+    /// Sample period \[s\].
     pub dt: f64,
-    /// Median period before resampling [s], if it was resampled onto a uniform grid.
+    /// Median period before resampling \[s\], if it was resampled onto a uniform grid.
     pub resampled_from: Option<f64>,
     /// Free-run fit % per channel on this recording.
     pub fit_percent: Vec<f64>,
@@ -153,7 +153,7 @@ pub struct SteadyStateEstimate {
     pub value: f64,
     /// Number of constant-command segments used.
     pub segments: usize,
-    /// Total settled time used [s].
+    /// Total settled time used \[s\].
     pub seconds: f64,
 }
 
@@ -162,7 +162,7 @@ pub struct SteadyStateEstimate {
 pub struct FileSeries {
     /// Source.
     pub source: PathBuf,
-    /// Time [s].
+    /// Time \[s\].
     pub t: Vec<f64>,
     /// Measured outputs per channel.
     pub measured: Vec<Vec<f64>>,
@@ -203,7 +203,7 @@ pub struct Identification {
     pub noise_std: Option<Vec<f64>>,
     /// Per-parameter bound state.
     pub bound_state: Vec<BoundState>,
-    /// Cut-off used [Hz].
+    /// Cut-off used \[Hz\].
     pub cutoff_hz: f64,
     /// How it was chosen.
     pub cutoff_choice: CutoffChoice,

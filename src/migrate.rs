@@ -53,7 +53,7 @@ pub fn robot_model(file: &ModelFile, profile: &RobotProfile) -> Result<RobotMode
 pub struct Run {
     /// What ran (`as it was`, `migrated`, `target's true θ`).
     pub label: String,
-    /// Distance error summary [m] over the whole run.
+    /// Distance error summary \[m\] over the whole run.
     pub error: ErrorSummary,
     /// θ̂ at the end.
     pub theta_hat_end: [f64; 6],
@@ -86,12 +86,12 @@ pub struct Migration {
 /// How the migrated controller is checked on the target.
 #[derive(Debug, Clone)]
 pub struct CheckSettings {
-    /// Tracking time [s].
+    /// Tracking time \[s\].
     pub duration_s: f64,
     /// Also run the controller set up with the target's true θ (known in simulation).
     pub with_truth: bool,
     /// The simulated target's settings (seed, encoders, effects such as a payload);
-    /// `duration_s` there is ignored. Not used on a [`Robot`](wheelid_core::Robot) backend.
+    /// `duration_s` there is ignored. Not used on a [`Robot`] backend.
     pub simulation: SimSettings,
 }
 

@@ -233,7 +233,7 @@ pub fn write_track_plots(r: &TrackResult, dir: &Path) -> Result<Vec<PathBuf>> {
     ])
 }
 
-/// `trajectory.png`: the desired and actual paths (x, y) [m], every `step`-th point.
+/// `trajectory.png`: the desired and actual paths (x, y) \[m\], every `step`-th point.
 fn trajectory_plot(r: &TrackResult, dir: &Path, step: usize) -> Result<PathBuf> {
     let path = dir.join("trajectory.png");
     {
@@ -275,7 +275,7 @@ fn trajectory_plot(r: &TrackResult, dir: &Path, step: usize) -> Result<PathBuf> 
     Ok(path)
 }
 
-/// `error.png`: the distance error [m] against time [s], every `step`-th point.
+/// `error.png`: the distance error \[m\] against time \[s\], every `step`-th point.
 fn error_plot(r: &TrackResult, dir: &Path, step: usize) -> Result<PathBuf> {
     let (t0, t1) = (r.t[0], r.t[r.t.len() - 1]);
     let path = dir.join("error.png");
@@ -312,7 +312,7 @@ fn error_plot(r: &TrackResult, dir: &Path, step: usize) -> Result<PathBuf> {
     Ok(path)
 }
 
-/// `theta.png`: θ̂1…θ̂6 of the adaptive law against time [s], every `step`-th point.
+/// `theta.png`: θ̂1…θ̂6 of the adaptive law against time \[s\], every `step`-th point.
 fn theta_plot(r: &TrackResult, dir: &Path, step: usize) -> Result<PathBuf> {
     let (t0, t1) = (r.t[0], r.t[r.t.len() - 1]);
     let path = dir.join("theta.png");
@@ -548,8 +548,8 @@ fn diagnosis_location_plot(d: &Diagnosis, dir: &Path) -> Result<PathBuf> {
 }
 
 /// The runs of a migration check side by side (`wheelid migrate --plot DIR`):
-/// * `migrate_paths.png`: the desired figure eight and each run's path (x, y) [m];
-/// * `migrate_error.png`: each run's distance error [m] against time [s].
+/// * `migrate_paths.png`: the desired figure eight and each run's path (x, y) \[m\];
+/// * `migrate_error.png`: each run's distance error \[m\] against time \[s\].
 ///
 /// `runs`: (label, result) in the order of [`crate::migrate::Migration::runs`].
 ///

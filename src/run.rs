@@ -66,7 +66,7 @@ use crate::registry::Registry;
 pub struct RunContext<'a> {
     /// The configuration file's directory.
     pub base: &'a Path,
-    /// The run's duration [s] (`duration_s`, default 150 s), for backends that plan ahead.
+    /// The run's duration \[s\] (`duration_s`, default 150 s), for backends that plan ahead.
     pub duration_s: f64,
 }
 
@@ -344,7 +344,7 @@ impl SolverSpec for BoxSpec {
 pub struct IdentifySection {
     /// `oe` (default), `iv`, `ls` or a plugin's estimator.
     pub estimator: Option<toml::Spanned<String>>,
-    /// Low-pass cut-off [Hz] (default: chosen from the data).
+    /// Low-pass cut-off \[Hz\] (default: chosen from the data).
     pub cutoff_hz: Option<f64>,
     /// Butterworth order of one pass.
     pub order: Option<usize>,

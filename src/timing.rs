@@ -63,13 +63,13 @@ pub struct TimedFit {
     pub fit: OutputErrorFit,
     /// The recordings as they were fitted (restamped, with the chosen output sampling).
     pub recordings: Vec<Recording>,
-    /// The residual offset δ [s] when it was fitted (then the last entry of `fit.theta`).
+    /// The residual offset δ \[s\] when it was fitted (then the last entry of `fit.theta`).
     pub offset: Option<f64>,
     /// What timing was used.
     pub timing: TimingReport,
 }
 
-/// Longest median sample period over `recs` [s].
+/// Longest median sample period over `recs` \[s\].
 fn period(recs: &[Recording]) -> f64 {
     recs.iter()
         .map(|r| r.sampling().dt_median)

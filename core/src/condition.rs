@@ -36,7 +36,7 @@ use crate::signal::{self, Butterworth, Sos, Stencil};
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ConditionSettings {
-    /// Low-pass cut-off [Hz]; `None` chooses it by the documented rule ([`suggest_cutoff`]).
+    /// Low-pass cut-off \[Hz\]; `None` chooses it by the documented rule ([`suggest_cutoff`]).
     pub cutoff_hz: Option<f64>,
     /// Butterworth order of one pass (the zero-phase result has twice the roll-off).
     pub order: usize,
@@ -66,7 +66,7 @@ pub enum CutoffChoice {
     Given,
     /// f_c = 2·f₉₅ of the commands, clamped (see module docs).
     CommandBandwidth {
-        /// f₉₅ of the commands [Hz] (`None` if every command was constant).
+        /// f₉₅ of the commands \[Hz\] (`None` if every command was constant).
         f95_hz: Option<f64>,
         /// Whether the clamp changed the value.
         clamped: bool,
@@ -83,9 +83,9 @@ pub struct Conditioned<'a> {
     /// The uniform recording as used (resampled if it was not uniform): the free-run simulation
     /// is driven by its commands and compared with its measurements.
     pub recording: Cow<'a, Recording>,
-    /// Sample period Δt [s].
+    /// Sample period Δt \[s\].
     pub dt: f64,
-    /// Median period before resampling [s], if the recording had to be resampled.
+    /// Median period before resampling \[s\], if the recording had to be resampled.
     pub resampled_from: Option<f64>,
     /// Commands aligned to the sample instants (see module docs, step 2) [m/s].
     pub v_ref: Vec<f64>,
@@ -262,9 +262,9 @@ pub fn make_uniform(rec: &Recording) -> Result<(Cow<'_, Recording>, Option<f64>)
 pub struct Uniform<'a> {
     /// The uniform recording: the caller's, borrowed, or the resampled one.
     pub recording: Cow<'a, Recording>,
-    /// The original median period [s] if it was resampled.
+    /// The original median period \[s\] if it was resampled.
     pub resampled_from: Option<f64>,
-    /// Its sample period Δt [s] (the median interval, which every interval is within 1e-6 of).
+    /// Its sample period Δt \[s\] (the median interval, which every interval is within 1e-6 of).
     pub dt: f64,
 }
 
@@ -298,7 +298,7 @@ pub fn uniform(rec: &Recording) -> Result<Uniform<'_>> {
     }
 }
 
-/// The default cut-off rule (module docs) over uniform recordings; returns f_c [Hz] and how it
+/// The default cut-off rule (module docs) over uniform recordings; returns f_c \[Hz\] and how it
 /// was chosen.
 ///
 /// # Errors
@@ -318,7 +318,7 @@ pub fn suggest_cutoff_uniform(recs: &[Uniform<'_>]) -> Result<(f64, CutoffChoice
     cutoff_rule(&sampled)
 }
 
-/// The default cut-off rule over recordings with their sample periods [s].
+/// The default cut-off rule over recordings with their sample periods \[s\].
 fn cutoff_rule(recs: &[(&Recording, f64)]) -> Result<(f64, CutoffChoice)> {
     let Some((_, dt_first)) = recs.first() else {
         return Err(Error::InvalidSetting(

@@ -32,7 +32,7 @@ use crate::{ParamInfo, Recording, Result};
 /// six-θ model: no delay, no limits, no friction, no payload change.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Terms {
-    /// Dead time of the commands [s].
+    /// Dead time of the commands \[s\].
     pub delay: f64,
     /// Largest rate of change of the (v, ω) setpoints [m/s², rad/s²].
     pub accel: Option<[f64; 2]>,
@@ -42,7 +42,7 @@ pub struct Terms {
     pub coulomb: [f64; 2],
     /// Right/left wheel gain ratio ρ.
     pub ratio: Option<f64>,
-    /// Change time [s] and θ1, θ2, θ3, θ5 after it.
+    /// Change time \[s\] and θ1, θ2, θ3, θ5 after it.
     pub payload: Option<(f64, [f64; 4])>,
     /// Relative change of the drive gain per second [1/s]: the loop's effort × (1 + drift (t − t0)).
     pub drift: f64,
@@ -155,9 +155,9 @@ pub struct ProbeData<'a> {
     pub accel: &'a [[Vec<f64>; 2]],
     /// θ1…θ6 of the model in hand.
     pub theta: &'a [f64],
-    /// Sample period [s].
+    /// Sample period \[s\].
     pub dt: f64,
-    /// Wheel track d [m], if known.
+    /// Wheel track d \[m\], if known.
     pub track: Option<f64>,
 }
 
@@ -192,7 +192,7 @@ pub struct FitData<'a> {
     pub covariance: &'a nalgebra::DMatrix<f64>,
     /// Where this effect's parameters start in `theta`.
     pub base: usize,
-    /// Wheel track d [m], if known.
+    /// Wheel track d \[m\], if known.
     pub track: Option<f64>,
 }
 
@@ -210,14 +210,14 @@ impl FitData<'_> {
             })
             .fold(0.0f64, |a, x| a.max(x.abs()))
     }
-    /// Longest recording [s].
+    /// Longest recording \[s\].
     pub fn span_s(&self) -> f64 {
         self.recordings
             .iter()
             .map(|r| r.t[r.len() - 1] - r.t[0])
             .fold(0.0f64, f64::max)
     }
-    /// Standard error of θ[i].
+    /// Standard error of θ\[i\].
     pub fn std_err(&self, i: usize) -> f64 {
         self.covariance[(i, i)].max(0.0).sqrt()
     }
@@ -270,9 +270,9 @@ pub trait Effect: Send + Sync + std::fmt::Debug {
         EffectChannels::Both
     }
     /// Parameter values at which the effect is absent, given θ1…θ6 and the middle of the
-    /// recordings' time span [s].
+    /// recordings' time span \[s\].
     fn null(&self, theta: &[f64], t_mid: f64) -> Vec<f64>;
-    /// Bounds of its parameters in a fit, given the span of allowed change times [s].
+    /// Bounds of its parameters in a fit, given the span of allowed change times \[s\].
     fn bounds(&self, t_range: (f64, f64)) -> Vec<(f64, f64)>;
     /// How its fit starts.
     fn search(&self) -> Search {
@@ -319,7 +319,7 @@ pub trait Effect: Send + Sync + std::fmt::Debug {
         false
     }
     /// The force it adds at state (v [m/s], ω [rad/s]) with parameters `p` on a robot of wheel
-    /// track `track` [m] (independent of θ); the default adds none.
+    /// track `track` \[m\] (independent of θ); the default adds none.
     fn force(&self, _p: &[f64], _v: f64, _w: f64, _track: f64) -> Force {
         Force::default()
     }

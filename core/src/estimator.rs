@@ -37,7 +37,7 @@ pub struct EstimatorInput<'a> {
     pub start: &'a [f64],
     /// Bounds (lower, upper) on θ, length p, when the run has them.
     pub bounds: Option<&'a [(f64, f64)]>,
-    /// The run's low-pass cut-off [Hz].
+    /// The run's low-pass cut-off \[Hz\].
     pub cutoff_hz: f64,
     /// The conditioning settings the data were prepared with.
     pub condition: &'a ConditionSettings,
@@ -50,7 +50,7 @@ pub struct EstimatorInput<'a> {
 pub struct FreeRun {
     /// Initial state per recording, one value per channel.
     pub initial: Vec<Vec<f64>>,
-    /// The command-to-response offset δ [s] it estimated, if it did.
+    /// The command-to-response offset δ \[s\] it estimated, if it did.
     pub offset: Option<f64>,
     /// The recordings as it fitted them (restamped, their output sampling set).
     pub recordings: Vec<Recording>,
@@ -126,12 +126,12 @@ pub struct TimingReport {
     pub stated: Option<Timing>,
     /// Output sampling used (stated, or the hypothesis the likelihood chose).
     pub sampling: VelocitySampling,
-    /// Residual offset δ [s] under the winning hypothesis, when fitted and kept: its commands
+    /// Residual offset δ \[s\] under the winning hypothesis, when fitted and kept: its commands
     /// act from t_k + δ (negative: before their stamps); 0 when stated or not significant.
     pub offset_s: f64,
-    /// Standard error of the fitted residual offset [s] (0 when stated).
+    /// Standard error of the fitted residual offset \[s\] (0 when stated).
     pub offset_std_s: f64,
-    /// The median sample period Δ [s] (the longest over the recordings).
+    /// The median sample period Δ \[s\] (the longest over the recordings).
     pub period_s: f64,
     /// −2 ln L of each convention fitted as a hypothesis (with its own offset), (convention,
     /// value): the smaller wins (instants with a handicap, `INSTANT_MARGIN` of the host's timing module).

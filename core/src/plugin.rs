@@ -24,7 +24,7 @@
 //! **Panics never cross.** A cdylib carries its own copy of std, and a panic unwinding from
 //! the plugin's std into the host's is a foreign exception that aborts the process. So every
 //! call into the plugin runs under `catch_unwind` *on the plugin's side*: the registration
-//! ([`export_plugin!`]), each factory (a trampoline stored with it, compiled into the
+//! ([`export_plugin!`](crate::export_plugin)), each factory (a trampoline stored with it, compiled into the
 //! plugin), and every method of the objects the factories return ([`PanicGuard`], wrapped
 //! around them inside the plugin). A panic becomes an error naming the plugin's message.
 //!
@@ -219,7 +219,7 @@ impl Registrar {
     }
 }
 
-/// The declaration a plugin exports as `WHEELID_PLUGIN` ([`export_plugin!`] writes it).
+/// The declaration a plugin exports as `WHEELID_PLUGIN` ([`export_plugin!`](crate::export_plugin) writes it).
 /// Plain data in a C layout, so the host can read and check it before calling anything.
 #[repr(C)]
 pub struct PluginDeclaration {
@@ -312,7 +312,7 @@ impl PluginDeclaration {
     }
 }
 
-/// Runs the plugin's registration under `catch_unwind` (called by [`export_plugin!`]'s entry
+/// Runs the plugin's registration under `catch_unwind` (called by [`export_plugin!`](crate::export_plugin)'s entry
 /// point, inside the plugin): 0 on success, 1 if it panicked (the message in
 /// `registrar.failure`), 2 for a null registrar.
 #[allow(clippy::not_unsafe_ptr_arg_deref)] // the one pointer the entry point receives

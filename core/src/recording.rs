@@ -9,8 +9,8 @@
 //! ```
 //!
 //! * `#` lines before the header are metadata, `key: value`.
-//! * Required columns (SI units): `t` [s] strictly increasing, `v_ref` [m/s], `w_ref` [rad/s],
-//!   `v` [m/s], `w` [rad/s]. Optional: `x`, `y` [m], `phi` [rad], `wl`, `wr` [rad/s].
+//! * Required columns (SI units): `t` \[s\] strictly increasing, `v_ref` [m/s], `w_ref` [rad/s],
+//!   `v` [m/s], `w` [rad/s]. Optional: `x`, `y` \[m\], `phi` \[rad\], `wl`, `wr` [rad/s].
 //!   Column order is free; other columns are ignored.
 //!
 //! Two metadata keys that wheelid writes and reads say how the samples relate to continuous
@@ -118,7 +118,7 @@ pub struct Recording {
     pub source: PathBuf,
     /// Metadata `key: value` pairs, in file order.
     pub meta: Vec<(String, String)>,
-    /// Time [s], strictly increasing.
+    /// Time \[s\], strictly increasing.
     pub t: Vec<f64>,
     /// Commanded forward velocity [m/s].
     pub v_ref: Vec<f64>,
@@ -128,11 +128,11 @@ pub struct Recording {
     pub v: Vec<f64>,
     /// Measured angular velocity [rad/s].
     pub w: Vec<f64>,
-    /// Optional odometry pose x [m].
+    /// Optional odometry pose x \[m\].
     pub x: Option<Vec<f64>>,
-    /// Optional odometry pose y [m].
+    /// Optional odometry pose y \[m\].
     pub y: Option<Vec<f64>>,
-    /// Optional heading [rad].
+    /// Optional heading \[rad\].
     pub phi: Option<Vec<f64>>,
     /// Optional left wheel angular velocity [rad/s].
     pub wl: Option<Vec<f64>>,
@@ -146,11 +146,11 @@ const OPTIONAL: [&str; 5] = ["x", "y", "phi", "wl", "wr"];
 /// How the sampling of a recording looks.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SamplingInfo {
-    /// Median sample period [s].
+    /// Median sample period \[s\].
     pub dt_median: f64,
-    /// Smallest sample period [s].
+    /// Smallest sample period \[s\].
     pub dt_min: f64,
-    /// Largest sample period [s].
+    /// Largest sample period \[s\].
     pub dt_max: f64,
     /// Whether the sampling counts as uniform: every period within 1e-6 relative of the median.
     pub uniform: bool,
@@ -220,7 +220,7 @@ impl Recording {
         }
     }
 
-    /// Duration t[n−1] − t[0] [s] (0 for fewer than two samples).
+    /// Duration t\[n−1\] − t\[0\] \[s\] (0 for fewer than two samples).
     pub fn duration(&self) -> f64 {
         match (self.t.first(), self.t.last()) {
             (Some(a), Some(b)) => b - a,

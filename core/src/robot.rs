@@ -27,11 +27,11 @@ use std::fmt;
 /// A planar pose: position of the robot's reference point and heading.
 #[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Pose {
-    /// x [m].
+    /// x \[m\].
     pub x: f64,
-    /// y [m].
+    /// y \[m\].
     pub y: f64,
-    /// Heading ψ [rad], counter-clockwise from the x axis (unwrapped where the backend can).
+    /// Heading ψ \[rad\], counter-clockwise from the x axis (unwrapped where the backend can).
     pub heading: f64,
 }
 
@@ -98,7 +98,7 @@ pub trait Robot {
     /// A short name for reports (`simulator`, `replay`, `pioneer`, `khepera`, or a plugin's).
     fn name(&self) -> &str;
 
-    /// The control period Δt [s]: how often the robot reports and accepts a new command.
+    /// The control period Δt \[s\]: how often the robot reports and accepts a new command.
     fn period_s(&self) -> f64;
 
     /// Sends the command v_ref [m/s], ω_ref [rad/s], which holds until the next `send`, and

@@ -45,9 +45,9 @@ pub use sci_rs::signal::filter::design::Sos;
 pub struct Butterworth {
     /// Filter order N (1…12).
     pub order: usize,
-    /// Cut-off frequency f_c [Hz], the −3 dB point of one pass.
+    /// Cut-off frequency f_c \[Hz\], the −3 dB point of one pass.
     pub cutoff_hz: f64,
-    /// Sample rate f_s [Hz].
+    /// Sample rate f_s \[Hz\].
     pub fs_hz: f64,
 }
 
@@ -284,7 +284,7 @@ pub enum Stencil {
     Central4,
 }
 
-/// Derivative of a uniformly sampled signal with period `dt` [s]; output has the length of `x`.
+/// Derivative of a uniformly sampled signal with period `dt` \[s\]; output has the length of `x`.
 ///
 /// # Errors
 /// [`Error::TooShort`] for fewer than 3 samples; [`Error::InvalidSetting`] if `dt ≤ 0`.
@@ -327,7 +327,7 @@ pub fn derivative(x: &[f64], dt: f64, stencil: Stencil) -> Result<Vec<f64>> {
     Ok(d)
 }
 
-/// The frequency [Hz] below which `fraction` of a signal's variance lies (periodogram of the
+/// The frequency \[Hz\] below which `fraction` of a signal's variance lies (periodogram of the
 /// mean-removed signal, sampled at `fs_hz`). Returns `None` for a constant signal.
 ///
 /// Used by the default cut-off rule (see `condition`).

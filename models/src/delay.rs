@@ -118,7 +118,7 @@ fn merge_sorted(a: &[f64], b: &[f64]) -> Vec<f64> {
     out
 }
 
-/// Eq. 2.19 with an input dead time τ_d = θ7 [s] (`delayed`).
+/// Eq. 2.19 with an input dead time τ_d = θ7 \[s\] (`delayed`).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct InputDelay;
 

@@ -55,9 +55,9 @@ use wheelid_core::{CommandHold, Error, Recording, Result, Sensitivities, Velocit
 
 mod speculative;
 
-/// Longest integration sub-step [s].
+/// Longest integration sub-step \[s\].
 pub const MAX_SUBSTEP: f64 = 0.02;
-/// Shortest integration sub-step [s]: time constants below a millisecond are not a robot's;
+/// Shortest integration sub-step \[s\]: time constants below a millisecond are not a robot's;
 /// a θ that asks for them (a fitter's trial step) integrates unstably and is rejected as a
 /// non-finite simulation instead of taking millions of sub-steps.
 pub const MIN_SUBSTEP: f64 = 1e-4;
@@ -166,13 +166,13 @@ pub fn substep(theta: &[f64; 6]) -> f64 {
 /// saves steps: the faster time constant is then shorter than half a sample and than 6.25 ms.
 pub const STIFF_SUBSTEPS: usize = 10;
 
-/// ETDRK4's longest sub-step [s]: its linear part is the Jacobian's diagonal, so the coupling
+/// ETDRK4's longest sub-step \[s\]: its linear part is the Jacobian's diagonal, so the coupling
 /// of v and ω (θ3 ω², θ5 v ω over θ1, θ2: tens per second for a stiff θ) is explicit; at 5 ms
 /// a stiff turning drive stays within 2e-6 of a fine RK4 and the sensitivities within 6e-4 of
 /// the simulation's derivative (tests; 1.5e-5 and 1.2e-3 at 20 ms).
 pub const ETD_MAX_SUBSTEP: f64 = 0.005;
 
-/// How an interval of length `span` [s] is integrated for θ: equal sub-steps by RK4, or by
+/// How an interval of length `span` \[s\] is integrated for θ: equal sub-steps by RK4, or by
 /// ETDRK4 when RK4 would take more than [`STIFF_SUBSTEPS`] (module doc). ETDRK4's sub-steps grow
 /// geometrically from half the fastest time constant — the fast transient after a command's
 /// change is resolved, its stages see the forcing that transient puts on the other channel — up
@@ -182,24 +182,24 @@ pub struct Plan {
     span: f64,
     /// RK4: the number of equal sub-steps; ETDRK4: 0.
     equal: usize,
-    /// ETDRK4's first sub-step and its longest [s].
+    /// ETDRK4's first sub-step and its longest \[s\].
     first: f64,
     cap: f64,
 }
 
 /// One sub-step of a [`Plan`]: the fractions `f0`, `f1` of the interval it spans, its length
-/// `h` [s] and its start `t0` and end `t1` [s] from the interval's start.
+/// `h` \[s\] and its start `t0` and end `t1` \[s\] from the interval's start.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Substep {
     /// Fraction of the interval where the sub-step starts.
     pub f0: f64,
     /// Fraction of the interval where it ends.
     pub f1: f64,
-    /// Its length [s].
+    /// Its length \[s\].
     pub h: f64,
-    /// Its start [s] after the interval's start.
+    /// Its start \[s\] after the interval's start.
     pub t0: f64,
-    /// Its end [s] after the interval's start.
+    /// Its end \[s\] after the interval's start.
     pub t1: f64,
 }
 
@@ -339,9 +339,9 @@ fn row<const N: usize>(i: usize) -> usize {
     }
 }
 
-/// One ETDRK4 step (Cox & Matthews 2002; module doc) of ẋ = f(x, u) of length `h` [s] with the
+/// One ETDRK4 step (Cox & Matthews 2002; module doc) of ẋ = f(x, u) of length `h` \[s\] with the
 /// command varying linearly from `u0` to `u1`, linear part `lin` = (∂f_v/∂v, ∂f_ω/∂ω) [1/s]
-/// applied by [`row`] to a state laid out as (v, ω, ∂v/∂p…, ∂ω/∂p…); adds ∫x over the step to
+/// applied by `row` to a state laid out as (v, ω, ∂v/∂p…, ∂ω/∂p…); adds ∫x over the step to
 /// `q`. Flushes components below 1e-200 to zero as [`rk4_step`] does.
 #[inline]
 pub fn etdrk4_step<const N: usize, U: StepCommand>(
@@ -664,7 +664,7 @@ fn integrate_columns<const M: usize, const Z: usize>(
 
 /// Free-run simulation as [`simulate`], with the output sensitivities to θ (n × 6 per channel)
 /// and to the initial state (n × 2 per channel), from the forward sensitivity equations in the
-/// module doc, integrated by the same RK4 sub-steps. From [`SPLIT_SAMPLES`] samples on, the
+/// module doc, integrated by the same RK4 sub-steps. From `SPLIT_SAMPLES` (20,000) samples on, the
 /// columns are integrated in two groups on two threads (each with its own copy of the state;
 /// the same numbers).
 ///

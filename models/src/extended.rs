@@ -39,7 +39,7 @@ use crate::dynamics::StepCommand;
 pub use crate::effects::Candidate;
 use crate::{dynamics, regressor};
 
-/// Shortest time constant θ1/θ4, θ2/θ6 the extended model accepts [s].
+/// Shortest time constant θ1/θ4, θ2/θ6 the extended model accepts \[s\].
 pub const MIN_TIME_CONSTANT: f64 = 1e-3;
 
 /// Smoothing of the Coulomb friction's sign: 2 mm/s and 0.01 rad/s (as the simulator).
@@ -55,7 +55,7 @@ pub struct Extended {
 
 impl Extended {
     /// The six-θ model with `candidates` (each at most once); `track_m` is the wheel track d
-    /// [m] that `wheel_asymmetry` needs.
+    /// \[m\] that `wheel_asymmetry` needs.
     ///
     /// # Errors
     /// [`Error::InvalidSetting`] for a repeated candidate or a track that is not > 0.
@@ -203,18 +203,18 @@ type Forces = Vec<(&'static dyn wheelid_core::Effect, Vec<f64>)>;
 struct Field {
     /// Effects that add a force, with their parameters.
     forces: Forces,
-    /// Wheel track [m] given to the forces.
+    /// Wheel track \[m\] given to the forces.
     track: f64,
     coulomb: [f64; 2],
     /// Whether dry friction is present (its tanh dominates the cost of a step).
     dry: bool,
     slip: [f64; 2],
-    /// Per-wheel efforts: (right gain, effort_max [m/s], κ [m]).
+    /// Per-wheel efforts: (right gain, effort_max [m/s], κ \[m\]).
     wheels: Option<(f64, f64, f64)>,
 }
 
 impl Field {
-    /// The field of the effects `ph` with the force effects `forces`, on a track [m].
+    /// The field of the effects `ph` with the force effects `forces`, on a track \[m\].
     fn new(forces: &Forces, track: f64, ph: &Terms) -> Self {
         Self {
             forces: forces.clone(),
@@ -661,9 +661,9 @@ fn hold_sensitivity<const M: usize>(th0: &[f64; 6], v0: f64, w0: f64) -> [[f64; 
 /// drive gain, each carrying the setpoint's sensitivities in `M` columns.
 struct Setpoints<'a> {
     ph: &'a Terms,
-    /// Wheel track [m].
+    /// Wheel track \[m\].
     track: f64,
-    /// The recording's first instant [s] (the drift's origin).
+    /// The recording's first instant \[s\] (the drift's origin).
     t0: f64,
 }
 

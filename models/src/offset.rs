@@ -72,7 +72,7 @@ impl<'a> CommandOffset<'a> {
         Ok(Self { inner, params })
     }
 
-    /// The parameter list of the wrapped `inner`: its own, then the offset δ [s].
+    /// The parameter list of the wrapped `inner`: its own, then the offset δ \[s\].
     pub fn params_of(inner: &dyn DynamicModel) -> Vec<ParamInfo> {
         let mut p = inner.params().to_vec();
         p.push(OFFSET_PARAM);

@@ -143,19 +143,19 @@ constants!(
     /// Physical constants of a robot with PD control on each wheel's angular velocity
     /// (Laut 2011 §2.2, Khepera III). SI units.
     WheelPdConstants {
-        /// Mass m [kg].
+        /// Mass m \[kg\].
         m,
         /// Moment of inertia about the vertical axis through G, I_z [kg·m²].
         i_z,
-        /// Distance from the wheel axle to the centre of mass G, b [m] (signed, forward positive).
+        /// Distance from the wheel axle to the centre of mass G, b \[m\] (signed, forward positive).
         b,
-        /// Wheel radius r [m] (kinematics).
+        /// Wheel radius r \[m\] (kinematics).
         r,
-        /// Track width, distance between the driving wheels, d [m].
+        /// Track width, distance between the driving wheels, d \[m\].
         d,
-        /// Tyre radius R_t [m] (force arm; usually = r).
+        /// Tyre radius R_t \[m\] (force arm; usually = r).
         r_t,
-        /// Armature resistance R_a [Ω].
+        /// Armature resistance R_a \[Ω\].
         r_a,
         /// Torque constant × gear ratio, k_a [N·m/A].
         k_a,
@@ -176,19 +176,19 @@ constants!(
     /// Physical constants of a robot with PD control on forward and angular velocity
     /// (Laut 2011 Appendix A.3, Pioneer 3-DX). SI units.
     VwPdConstants {
-        /// Mass m [kg].
+        /// Mass m \[kg\].
         m,
         /// Moment of inertia about the vertical axis through G, I_z [kg·m²].
         i_z,
-        /// Distance from the wheel axle to the centre of mass G, b [m] (signed, forward positive).
+        /// Distance from the wheel axle to the centre of mass G, b \[m\] (signed, forward positive).
         b,
-        /// Wheel radius r [m].
+        /// Wheel radius r \[m\].
         r,
-        /// Track width d [m].
+        /// Track width d \[m\].
         d,
-        /// Tyre radius R_t [m].
+        /// Tyre radius R_t \[m\].
         r_t,
-        /// Armature resistance R_a [Ω].
+        /// Armature resistance R_a \[Ω\].
         r_a,
         /// Torque constant × gear ratio, k_a [N·m/A].
         k_a,

@@ -83,7 +83,7 @@ fn sinc(x: f64) -> f64 {
 
 impl KinematicLaw {
     /// (v_ref^k [m/s], ω_ref^k [rad/s]) of eq. 4.8 for the desired state `d` and the pose
-    /// (x [m], y [m], φ [rad]).
+    /// (x \[m\], y \[m\], φ \[rad\]).
     pub fn command(&self, d: &DesiredState, x: f64, y: f64, phi: f64) -> [f64; 2] {
         let (ex, ey) = (d.x - x, d.y - y);
         let ephi = wrap_angle(d.phi - phi);
@@ -105,7 +105,7 @@ pub struct AdaptiveSettings {
     pub k_w: f64,
     /// Adaptation gains γ1…γ6 (diagonal of γ, eq. 3.21); all zero: no adaptation.
     pub gamma: [f64; 6],
-    /// Adaptation starts at this time [s].
+    /// Adaptation starts at this time \[s\].
     pub start_s: f64,
     /// Parameters held fixed, 1-based (e.g. `[4, 6]`, §4.4).
     pub frozen: Vec<usize>,
@@ -225,7 +225,7 @@ impl AdaptiveController {
         self.theta_hat
     }
 
-    /// One controller step at time `t` [s] with period `dt` [s]: from the kinematic commands
+    /// One controller step at time `t` \[s\] with period `dt` \[s\]: from the kinematic commands
     /// `kinematic` = (v_ref^k, ω_ref^k) and the measured (v, ω), returns the command
     /// (v_ref [m/s], ω_ref [rad/s]) = G θ̂ and then advances θ̂ by one Euler step of the
     /// projected adaptive law (if `t` ≥ the start time).

@@ -42,7 +42,7 @@ use wheelid_core::{Error, Result};
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct InputDelay {
-    /// Delay [s] (≥ 0).
+    /// Delay \[s\] (≥ 0).
     pub delay_s: f64,
 }
 
@@ -89,7 +89,7 @@ pub struct WheelAsymmetry {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct PayloadChange {
-    /// When the payload is added [s].
+    /// When the payload is added \[s\].
     pub time_s: f64,
     /// θ1…θ6 from then on.
     pub theta_after: [f64; 6],
@@ -143,7 +143,7 @@ pub struct MeasurementNoise {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SampleJitter {
-    /// Standard deviation of each sample instant's error [s].
+    /// Standard deviation of each sample instant's error \[s\].
     pub std_s: f64,
 }
 

@@ -22,19 +22,19 @@
 //! terms = [[0.5, 1.0], [0.25, 0.3]]   # (amplitude, angular frequency [rad/s])
 //! ```
 //!
-//! The signals (t [s]; τ = t mod P):
+//! The signals (t \[s\]; τ = t mod P):
 //!
 //! * [`Signal::Constant`]: u = value.
 //! * [`Signal::SumOfSines`]: u = c + Σᵢ aᵢ sin(ωᵢ t), ωᵢ in rad/s — the form of every
 //!   excitation in the thesis (§4.2, §4.4.1, §4.4.2).
 //! * [`Signal::Steps`]: u = levels[⌊t / hold⌋ mod n], each level held `hold_s`, cycling.
-//! * [`Signal::Chirp`]: linear sweep from f₀ to f₁ [Hz] over T,
+//! * [`Signal::Chirp`]: linear sweep from f₀ to f₁ \[Hz\] over T,
 //!   u = c + A sin θ(t), θ(t) = 2π (f₀ t + (f₁ − f₀) t² / (2T)) for 0 ≤ t ≤ T, so the
 //!   instantaneous frequency θ'(t)/2π = f₀ + (f₁ − f₀) t/T. After T the sweep does not repeat:
 //!   the phase continues at f₁ (θ = θ(T) + 2π f₁ (t − T)), so u stays smooth; before 0 it runs
 //!   at f₀.
 //! * [`Signal::Multisine`]: u = c + a Σₖ cos(2π nₖ τ / P + φₖ), k = 1…K, on the frequency grid
-//!   nₖ/P [Hz] between f_min and f_max, periodic with period P, with Schroeder phases
+//!   nₖ/P \[Hz\] between f_min and f_max, periodic with period P, with Schroeder phases
 //!   φₖ = −k(k − 1)π/K (Schroeder 1970, low crest factor for a flat spectrum) or
 //!   independent uniform random phases from a seeded ChaCha8 stream. a is chosen so that the
 //!   **peak** max |u − c| over a period equals `amplitude` (see [`MultisineSpec::amplitude`]).
@@ -63,7 +63,7 @@ pub struct SumOfSines {
 }
 
 impl SumOfSines {
-    /// Value at time `t` [s].
+    /// Value at time `t` \[s\].
     pub fn at(&self, t: f64) -> f64 {
         self.offset
             + self
@@ -109,13 +109,13 @@ pub struct MultisineSpec {
     /// by Newton's method, relative accuracy ≈ 1e−12; building costs O(K · 64 n_K) operations).
     /// The rms of u − c is `amplitude / crest_factor`.
     pub amplitude: f64,
-    /// Lowest admissible line [Hz].
+    /// Lowest admissible line \[Hz\].
     pub f_min_hz: f64,
-    /// Highest admissible line [Hz].
+    /// Highest admissible line \[Hz\].
     pub f_max_hz: f64,
     /// Number of excited lines K (≥ 1 and at most the number of grid lines in the band).
     pub lines: usize,
-    /// Period P [s]; the frequency resolution is 1/P.
+    /// Period P \[s\]; the frequency resolution is 1/P.
     pub period_s: f64,
     /// Phase choice.
     pub phases: Phases,
@@ -138,7 +138,7 @@ pub struct Multisine {
     raw_peak: f64,
 }
 
-/// Relative tolerance when mapping a band edge [Hz] to a harmonic number.
+/// Relative tolerance when mapping a band edge \[Hz\] to a harmonic number.
 const GRID_TOL: f64 = 1e-9;
 
 fn invalid(msg: impl Into<String>) -> Error {
@@ -234,7 +234,7 @@ impl Multisine {
         &self.harmonics
     }
 
-    /// Frequencies of the excited lines [Hz].
+    /// Frequencies of the excited lines \[Hz\].
     pub fn frequencies_hz(&self) -> Vec<f64> {
         self.harmonics
             .iter()
@@ -242,7 +242,7 @@ impl Multisine {
             .collect()
     }
 
-    /// Phases φₖ [rad], in line order.
+    /// Phases φₖ \[rad\], in line order.
     pub fn phases(&self) -> &[f64] {
         &self.phases
     }
@@ -258,7 +258,7 @@ impl Multisine {
         self.raw_peak / (self.harmonics.len() as f64 / 2.0).sqrt()
     }
 
-    /// Value at time `t` [s].
+    /// Value at time `t` \[s\].
     pub fn at(&self, t: f64) -> f64 {
         let p = self.spec.period_s;
         let x = t.rem_euclid(p) / p;
@@ -372,7 +372,7 @@ pub enum Signal {
     Steps {
         /// The levels, in order (units of u).
         levels: Vec<f64>,
-        /// How long each level is held [s].
+        /// How long each level is held \[s\].
         hold_s: f64,
     },
     /// Linear chirp u = offset + A sin θ(t), θ = 2π (f₀ t + (f₁ − f₀) t²/(2T)) on [0, T];
@@ -383,11 +383,11 @@ pub enum Signal {
         offset: f64,
         /// Amplitude A (units of u; peak deviation from the offset).
         amplitude: f64,
-        /// Start frequency f₀ [Hz].
+        /// Start frequency f₀ \[Hz\].
         f0_hz: f64,
-        /// End frequency f₁ [Hz].
+        /// End frequency f₁ \[Hz\].
         f1_hz: f64,
-        /// Sweep duration T [s].
+        /// Sweep duration T \[s\].
         duration_s: f64,
     },
     /// A periodic multisine with peak normalisation (see [`Multisine`]).
@@ -395,7 +395,7 @@ pub enum Signal {
 }
 
 impl Signal {
-    /// Value at time `t` [s].
+    /// Value at time `t` \[s\].
     pub fn at(&self, t: f64) -> f64 {
         match self {
             Self::Constant { value } => *value,
@@ -489,7 +489,7 @@ impl Signal {
     }
 }
 
-/// θ(t) of the linear chirp [rad] (see [`Signal::Chirp`]).
+/// θ(t) of the linear chirp \[rad\] (see [`Signal::Chirp`]).
 fn chirp_phase(f0: f64, f1: f64, dur: f64, t: f64) -> f64 {
     if dur <= 0.0 {
         return 2.0 * PI * f1 * t;
@@ -515,7 +515,7 @@ impl From<Multisine> for Signal {
     }
 }
 
-/// Period P [s] of [`Excitation::random_multisine`]: frequency resolution 1/60 Hz.
+/// Period P \[s\] of [`Excitation::random_multisine`]: frequency resolution 1/60 Hz.
 pub const RANDOM_MULTISINE_PERIOD_S: f64 = 60.0;
 
 /// A pair of commands (v_ref [m/s], ω_ref [rad/s]).
@@ -648,7 +648,7 @@ impl Excitation {
         })
     }
 
-    /// Commands (v_ref [m/s], ω_ref [rad/s]) at time `t` [s].
+    /// Commands (v_ref [m/s], ω_ref [rad/s]) at time `t` \[s\].
     pub fn at(&self, t: f64) -> (f64, f64) {
         (self.v_ref.at(t), self.w_ref.at(t))
     }

@@ -48,7 +48,7 @@ pub struct RobotModel {
     /// Physical bounds on θ (lower, upper), as §4.1 builds them from the robot's constants.
     #[serde(default)]
     pub bounds: Option<([f64; 6], [f64; 6])>,
-    /// Control period Δt [s].
+    /// Control period Δt \[s\].
     pub period_s: f64,
     /// Speed limit [m/s] (a diagnosed `velocity_saturation` if lower).
     pub v_max: f64,
@@ -57,7 +57,7 @@ pub struct RobotModel {
     /// Acceleration limits (v̇ [m/s²], ω̇ [rad/s²]) a diagnosis found (`acceleration_limit`).
     #[serde(default)]
     pub accel_max: Option<[f64; 2]>,
-    /// Dead time [s] a diagnosis found (`input_delay`).
+    /// Dead time \[s\] a diagnosis found (`input_delay`).
     #[serde(default)]
     pub delay_s: Option<f64>,
 }
@@ -226,7 +226,7 @@ impl Migrated {
     }
 }
 
-/// A figure eight in words: its lengths [m] and frequency [rad/s].
+/// A figure eight in words: its lengths \[m\] and frequency [rad/s].
 fn describe(t: &TrajectorySpec) -> String {
     let e = |e: &FigureEight| {
         format!(

@@ -10,11 +10,11 @@ pub struct RobotProfile {
     pub name: String,
     /// True θ1…θ6 of eq. 2.19 (units as `wheelid_models::regressor::PARAMS`).
     pub theta: [f64; 6],
-    /// Wheel radius r [m].
+    /// Wheel radius r \[m\].
     pub wheel_radius: f64,
-    /// Track width d [m].
+    /// Track width d \[m\].
     pub track: f64,
-    /// Control and sampling period [s].
+    /// Control and sampling period \[s\].
     pub period_s: f64,
     /// Encoder ticks per wheel revolution.
     pub ticks_per_rev: f64,
@@ -22,11 +22,11 @@ pub struct RobotProfile {
     pub speed_resolution: f64,
     /// Standard deviation of the wheel-speed measurement noise [m/s] per wheel.
     pub wheel_noise_std: f64,
-    /// Distance a [m] of the tracked point h ahead of the wheel axle (eq. 2.19; 0 puts h on
+    /// Distance a \[m\] of the tracked point h ahead of the wheel axle (eq. 2.19; 0 puts h on
     /// the axle, as the kinematic law of eq. 4.8 assumes).
     #[serde(default)]
     pub a: f64,
-    /// Mass [kg] (§4.3); informative, the dynamics are in θ.
+    /// Mass \[kg\] (§4.3); informative, the dynamics are in θ.
     pub mass_kg: f64,
     /// Largest forward speed [m/s] (§4.3), the default level of the velocity-saturation effect.
     pub v_max: f64,

@@ -36,7 +36,7 @@ use crate::profile::RobotProfile;
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SimSettings {
-    /// Duration [s] (for [`simulate_recording`]).
+    /// Duration \[s\] (for [`simulate_recording`]).
     pub duration_s: f64,
     /// Random seed for the noise and jitter.
     pub seed: u64,
@@ -64,17 +64,17 @@ impl Default for SimSettings {
 /// What the robot reports at one sample instant.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Sample {
-    /// Time [s].
+    /// Time \[s\].
     pub t: f64,
     /// Measured forward velocity [m/s] (window average over the last period with encoders).
     pub v: f64,
     /// Measured angular velocity [rad/s].
     pub w: f64,
-    /// Pose x of the point h [m] (odometry with encoders).
+    /// Pose x of the point h \[m\] (odometry with encoders).
     pub x: f64,
-    /// Pose y of the point h [m].
+    /// Pose y of the point h \[m\].
     pub y: f64,
-    /// Heading [rad] (unwrapped).
+    /// Heading \[rad\] (unwrapped).
     pub phi: f64,
 }
 
@@ -91,12 +91,12 @@ pub struct SimRobot {
     encoders: bool,
     rng: ChaCha8Rng,
     wheel_noise: Normal<f64>,
-    /// Current sample index and time [s].
+    /// Current sample index and time \[s\].
     k: usize,
     t: f64,
     /// True state (x, y, ψ, v, ω), (x, y) the point h.
     s: [f64; 5],
-    /// Wheel angles (right, left) [rad] and the ticks counted at the last sample.
+    /// Wheel angles (right, left) \[rad\] and the ticks counted at the last sample.
     ang: [f64; 2],
     ticks: [f64; 2],
     /// Odometry pose of the axle centre (x, y, φ), `a` behind the point h.
@@ -172,7 +172,7 @@ impl SimRobot {
         Ok(robot)
     }
 
-    /// Places the robot: the point h at (x, y), heading ψ [rad], velocities v [m/s], ω [rad/s];
+    /// Places the robot: the point h at (x, y), heading ψ \[rad\], velocities v [m/s], ω [rad/s];
     /// odometry restarts from there, and the setpoint in force is the one that holds (v, ω)
     /// steady (θ4 v − θ3 ω², θ6 ω + θ5 v ω), so a rate limit does not brake a robot placed at
     /// speed. Call before the first [`SimRobot::step`].
@@ -206,7 +206,7 @@ impl SimRobot {
         &self.profile
     }
 
-    /// Nominal sample period [s].
+    /// Nominal sample period \[s\].
     pub fn period_s(&self) -> f64 {
         self.profile.period_s
     }
@@ -282,7 +282,7 @@ impl SimRobot {
         [uv, uw]
     }
 
-    /// The drive gain g at time `tau` [s] (`gain_drift`: 1 + rate_per_s · τ; else 1).
+    /// The drive gain g at time `tau` \[s\] (`gain_drift`: 1 + rate_per_s · τ; else 1).
     fn drive_gain(&self, tau: f64) -> f64 {
         self.effects
             .gain_drift

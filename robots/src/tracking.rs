@@ -32,7 +32,7 @@ pub enum Start {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct TrackSettings {
-    /// Duration [s].
+    /// Duration \[s\].
     pub duration_s: f64,
     /// The desired trajectory; `None`: the figure-eight preset for the robot
     /// ([`TrajectorySpec::for_profile`]).
@@ -45,7 +45,7 @@ pub struct TrackSettings {
     pub adaptation: AdaptiveSettings,
     /// Initial state.
     pub start: Start,
-    /// Control period [s]; `None`: the robot's period.
+    /// Control period \[s\]; `None`: the robot's period.
     pub control_period_s: Option<f64>,
     /// Clip the commands to the profile's ±v_max, ±w_max before sending them (as a robot's
     /// firmware does; without it a diverging adaptation ends the run with an error).
@@ -77,7 +77,7 @@ fn yes() -> bool {
     true
 }
 
-/// Summary of a distance-error series [m].
+/// Summary of a distance-error series \[m\].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct ErrorSummary {
     /// Root mean square over the run.
@@ -105,15 +105,15 @@ impl ErrorSummary {
 pub struct TrackResult {
     /// Robot profile name.
     pub robot: String,
-    /// Time [s].
+    /// Time \[s\].
     pub t: Vec<f64>,
-    /// Desired position (x_d, y_d) [m].
+    /// Desired position (x_d, y_d) \[m\].
     pub desired: Vec<[f64; 2]>,
-    /// True position (x, y) of the point h [m].
+    /// True position (x, y) of the point h \[m\].
     pub actual: Vec<[f64; 2]>,
-    /// Position the controller used (odometry with encoders) [m].
+    /// Position the controller used (odometry with encoders) \[m\].
     pub measured: Vec<[f64; 2]>,
-    /// Distance error [m].
+    /// Distance error \[m\].
     pub error: Vec<f64>,
     /// Commands sent (v_ref [m/s], ω_ref [rad/s]).
     pub command: Vec<[f64; 2]>,
@@ -225,7 +225,7 @@ fn robot_error(e: RobotError) -> Error {
 
 /// What the tracking loop reads from a plant each period.
 struct Report {
-    /// Time since the run's start [s].
+    /// Time since the run's start \[s\].
     t: f64,
     v: f64,
     w: f64,

@@ -52,11 +52,11 @@ use wheelid_core::Error;
 /// The desired state of a robot at one instant.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct DesiredState {
-    /// Position x [m].
+    /// Position x \[m\].
     pub x: f64,
-    /// Position y [m].
+    /// Position y \[m\].
     pub y: f64,
-    /// Heading φ = atan2(ẏ, ẋ) [rad], in (−π, π] (A.5 / A.25).
+    /// Heading φ = atan2(ẏ, ẋ) \[rad\], in (−π, π] (A.5 / A.25).
     pub phi: f64,
     /// Forward speed v = √(ẋ² + ẏ²) [m/s] (A.4 / A.24).
     pub v: f64,
@@ -72,7 +72,7 @@ pub struct DesiredState {
 
 /// A desired trajectory: the desired state as a function of time.
 pub trait Trajectory {
-    /// The desired state at time `t` [s].
+    /// The desired state at time `t` \[s\].
     fn at(&self, t: f64) -> DesiredState;
 }
 
@@ -136,9 +136,9 @@ fn finite(what: &str, pairs: &[(&str, f64)]) -> Result<(), Error> {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct FigureEight {
-    /// Amplitude A_x in x [m] (half the width of each lobe's span in x).
+    /// Amplitude A_x in x \[m\] (half the width of each lobe's span in x).
     pub ax: f64,
-    /// Amplitude A_y in y [m] (each lobe spans 0…±A_y).
+    /// Amplitude A_y in y \[m\] (each lobe spans 0…±A_y).
     pub ay: f64,
     /// Base frequency f [rad/s]; the period is 2π/f.
     pub f: f64,
@@ -168,7 +168,7 @@ impl FigureEight {
         }
     }
 
-    /// Period 2π/f [s].
+    /// Period 2π/f \[s\].
     pub fn period_s(&self) -> f64 {
         2.0 * std::f64::consts::PI / self.f
     }
@@ -255,7 +255,7 @@ impl Trajectory for FigureEight {
 pub struct FigureEightDither {
     /// The figure eight being dithered.
     pub base: FigureEight,
-    /// Dither amplitude g [m].
+    /// Dither amplitude g \[m\].
     pub g: f64,
     /// Dither carrier frequency h [rad/s].
     pub h: f64,
@@ -307,7 +307,7 @@ impl FigureEightDither {
         )
     }
 
-    /// The dither and its derivatives [d, ḋ, d̈, d⃛] at `t` [s] (units m, m/s, m/s², m/s³):
+    /// The dither and its derivatives [d, ḋ, d̈, d⃛] at `t` \[s\] (units m, m/s, m/s², m/s³):
     /// A.13, the ḋ and d̈ of A.14–A.16, and d⃛, by the Leibniz rule on
     /// sin(ht) · cos(kt) · e^{lt}.
     pub fn dither(&self, t: f64) -> [f64; 4] {

@@ -80,7 +80,7 @@ fn odometry_msg(ns: i64, x: f64, y: f64, yaw: f64, v: f64, w: f64) -> Odometry {
     }
 }
 
-/// One message of a hand-built bag: topic, log time [ns], payload.
+/// One message of a hand-built bag: topic, log time \[ns\], payload.
 struct Raw {
     topic: &'static str,
     log_ns: u64,

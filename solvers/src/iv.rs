@@ -34,7 +34,7 @@
 //! reference estimator.
 //!
 //! Covariance: Cov(θ̂_c) = A (Σ_l w_l Σ_t g_t g_{t+l}ᵀ) Aᵀ · n/(n − p), A = (ZᵀΦ)⁻¹,
-//! g_t = Z[t,:]ᵀ e_t, e = y − Φθ̂, with Bartlett weights over the given correlation length.
+//! g_t = Z\[t,:\]ᵀ e_t, e = y − Φθ̂, with Bartlett weights over the given correlation length.
 
 use nalgebra::{DMatrix, DVector};
 use wheelid_core::condition::{self, ConditionSettings};

@@ -31,7 +31,7 @@
 //! weights give a consistent θ̂; these make it efficient when the channels' noise levels
 //! differ.
 //!
-//! **Long recordings.** From [`WARM_START_FACTOR`] × [`OutputError::warm_start`] samples on (a
+//! **Long recordings.** From [`WARM_START_FACTOR`] × `OutputError::warm_start` samples on (a
 //! 1e6-sample drive), the same fit is first run on the recordings' heads — their first
 //! `warm_start` ([`WARM_START_SAMPLES`]) samples in all, shared in proportion to their lengths, the same
 //! bounds and weighting — and the full fit starts from that θ̂, so that its own iterations,
@@ -132,7 +132,7 @@ pub struct OutputErrorFit {
     pub status: SolveStatus,
     /// Per-parameter bound state.
     pub bound_state: Vec<BoundState>,
-    /// Residual correlation length used for the covariance [samples].
+    /// Residual correlation length used for the covariance \[samples\].
     pub correlation_lags: usize,
     /// Sensitivities ∂ŷ/∂(θ, x0) at θ̂ (or within the last converged step of it, see
     /// [`OutputError::fit`]), unweighted: one row per residual in the cost, time-major (sample
@@ -141,7 +141,7 @@ pub struct OutputErrorFit {
     /// the Jacobian the covariance was computed from; a caller that tests the residual against
     /// other directions (a score test) projects it out without simulating again.
     pub jacobian: DMatrix<f64>,
-    /// Wall time of the fit [s].
+    /// Wall time of the fit \[s\].
     pub seconds: f64,
 }
 

@@ -37,7 +37,7 @@ pub(crate) struct DiagnoseArgs {
     /// Family-wise level of the residual tests (Holm).
     #[arg(long)]
     alpha: Option<f64>,
-    /// Wheel track [m] for wheel_asymmetry (default: from the recording's metadata).
+    /// Wheel track \[m\] for wheel_asymmetry (default: from the recording's metadata).
     #[arg(long)]
     track: Option<f64>,
     /// Write PNG plots into this directory.

@@ -40,7 +40,7 @@ pub(crate) struct IdentifyArgs {
     /// `--estimator oe`, projected on by iv, and by `--solver box` for ls.
     #[arg(long)]
     bounds: Option<PathBuf>,
-    /// Low-pass cut-off [Hz] (default: chosen from the commands' bandwidth, see the report).
+    /// Low-pass cut-off \[Hz\] (default: chosen from the commands' bandwidth, see the report).
     #[arg(long)]
     cutoff: Option<f64>,
     /// Butterworth order of one filter pass.

@@ -30,7 +30,7 @@ pub(crate) struct MigrateArgs {
     /// Write the migrated controller (TOML; `wheelid track --controller` runs it).
     #[arg(long)]
     out: Option<PathBuf>,
-    /// Tracking time on the target [s].
+    /// Tracking time on the target \[s\].
     #[arg(long, default_value_t = 90.0)]
     duration: f64,
     /// Where the target runs: `simulator` (eq. 2.19 with the target model's θ) or `physics`

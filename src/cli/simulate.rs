@@ -34,7 +34,7 @@ pub(crate) struct SimulateArgs {
     /// multisine (random-phase multisines up to 2 Hz, seeded by --seed).
     #[arg(long, value_parser = ["thesis", "regression", "multisine"])]
     excitation: Option<String>,
-    /// Duration [s].
+    /// Duration \[s\].
     #[arg(long)]
     duration: Option<f64>,
     /// Random seed (noise, jitter, multisine phases).

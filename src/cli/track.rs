@@ -39,7 +39,7 @@ pub(crate) struct TrackArgs {
     /// Adaptation gains γ1…γ6, comma-separated (one value: the same for all).
     #[arg(long, value_delimiter = ',')]
     gamma: Option<Vec<f64>>,
-    /// Adaptation start time [s].
+    /// Adaptation start time \[s\].
     #[arg(long)]
     adapt_from: Option<f64>,
     /// Parameters held fixed during adaptation, 1-based, comma-separated (e.g. 4,6).
@@ -48,7 +48,7 @@ pub(crate) struct TrackArgs {
     /// Use the figure eight with the dither (A.2).
     #[arg(long)]
     dither: bool,
-    /// Duration [s].
+    /// Duration \[s\].
     #[arg(long)]
     duration: Option<f64>,
     /// Random seed of the robot's noise.

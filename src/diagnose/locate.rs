@@ -9,7 +9,7 @@ use wheelid_core::residual::{self, Independence, Whiteness};
 
 use super::score::Outputs;
 
-/// Frequency bands [Hz] of the breakdown (the last one ends at Nyquist).
+/// Frequency bands \[Hz\] of the breakdown (the last one ends at Nyquist).
 const BANDS: [f64; 5] = [0.0, 0.1, 0.3, 1.0, 3.0];
 
 /// A region or window's share of the misfit.
@@ -26,9 +26,9 @@ pub struct Share {
 /// A frequency band's part in the misfit.
 #[derive(Debug, Clone, Serialize)]
 pub struct Band {
-    /// Lower edge [Hz].
+    /// Lower edge \[Hz\].
     pub from_hz: f64,
-    /// Upper edge [Hz].
+    /// Upper edge \[Hz\].
     pub to_hz: f64,
     /// Share of the residual's power in this band.
     pub residual_share: f64,
@@ -47,7 +47,7 @@ pub struct ChannelLocation {
     pub whiteness: Whiteness,
     /// Residual–command independence, against `v_ref` then `w_ref`.
     pub independence: Vec<Independence>,
-    /// Lags of the largest cross-correlation with `v_ref`, `w_ref` [s] (> 0: the residual
+    /// Lags of the largest cross-correlation with `v_ref`, `w_ref` \[s\] (> 0: the residual
     /// follows the command).
     pub peak_lag_s: Vec<f64>,
     /// Breakdown by frequency band.
@@ -61,9 +61,9 @@ pub struct ChannelLocation {
 /// The residual-analysis breakdown of the validation samples.
 #[derive(Debug, Clone, Serialize)]
 pub struct Location {
-    /// Lags tested each side [samples].
+    /// Lags tested each side \[samples\].
     pub max_lag: usize,
-    /// Sample period [s].
+    /// Sample period \[s\].
     pub dt: f64,
     /// v then ω.
     pub channels: Vec<ChannelLocation>,
@@ -254,7 +254,7 @@ pub(crate) fn locate(
 type Region<'a> = (&'a str, Box<dyn Fn(usize) -> bool + 'a>);
 
 /// The residual `e`'s share of its power in each of [`BANDS`], and its power over the
-/// measured signal `y`'s there (periodograms at sample period `dt` [s]).
+/// measured signal `y`'s there (periodograms at sample period `dt` \[s\]).
 fn bands(e: &[f64], y: &[f64], dt: f64) -> Vec<Band> {
     let (pe, py) = (band_power(e, dt), band_power(y, dt));
     let total: f64 = pe.iter().sum::<f64>().max(1e-300);

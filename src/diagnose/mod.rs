@@ -11,14 +11,14 @@
 //! 2. **test** — on the validation blocks: residual whiteness (Ljung–Box) and residual–command
 //!    independence (cross-correlation at lags −L…L with Ljung's bounds,
 //!    `wheelid_core::residual`), free-run fit %; on the training blocks: each candidate's
-//!    fingerprint, a score test of its pattern ([`score`]; a limit probed at three fractions of
+//!    fingerprint, a score test of its pattern (`score`; a limit probed at three fractions of
 //!    the level read off the data, a payload change at five times, Bonferroni for each grid).
 //!    A mismatch is declared on tests that survive Holm's correction over the whole family
 //!    (independence and fingerprints), or where a channel's validation residual is more than
 //!    [`NOISE_FLOOR_FACTOR`] times its measurement noise floor, and only where some channel's
 //!    validation fit is below [`PRACTICAL_FIT_PERCENT`]; never on whiteness alone;
 //! 3. **locate** — per channel, the residual by lag, frequency band, operating region and time
-//!    window ([`locate`]);
+//!    window (`locate`);
 //! 4. **name** — the candidates whose fingerprint survives the correction are nominated (when
 //!    none does but a residual is above the noise floor: those significant on their own), the
 //!    strongest first — every effect of `wheelid_models::effects::EFFECTS` (`input_delay`,
@@ -111,7 +111,7 @@ pub struct DiagnoseSettings {
     pub blocks: usize,
     /// Family-wise level of the tests (Holm) [-].
     pub alpha: f64,
-    /// Largest lag of the correlation tests [s].
+    /// Largest lag of the correlation tests \[s\].
     pub max_lag_s: f64,
     /// Smallest relative drop of the validation cost that counts as a clear improvement [-].
     pub min_improvement: f64,
@@ -119,7 +119,7 @@ pub struct DiagnoseSettings {
     pub max_effects: usize,
     /// The candidate library searched.
     pub candidates: Vec<Candidate>,
-    /// Wheel track d [m] for `wheel_asymmetry`; `None`: from the recording's metadata
+    /// Wheel track d \[m\] for `wheel_asymmetry`; `None`: from the recording's metadata
     /// (`track`, `kinematics: … track X m`, or a built-in `robot`), else the candidate is
     /// skipped.
     pub track_m: Option<f64>,
@@ -252,7 +252,7 @@ pub struct Unexplained {
 pub struct DiagnosisSeries {
     /// Where it came from.
     pub source: PathBuf,
-    /// Time [s].
+    /// Time \[s\].
     pub t: Vec<f64>,
     /// Validation sample flags.
     pub validation: Vec<bool>,
@@ -292,7 +292,7 @@ pub struct Diagnosis {
     pub final_stage: Stage,
     /// Where the final model's misfit lives.
     pub final_location: Location,
-    /// Wall time [s].
+    /// Wall time \[s\].
     pub seconds: f64,
     /// Series for the plots.
     #[serde(skip)]

@@ -104,7 +104,7 @@ impl Data {
             cost,
         )
     }
-    /// Earliest and latest time over the recordings [s].
+    /// Earliest and latest time over the recordings \[s\].
     pub(super) fn span(&self) -> (f64, f64) {
         let lo = self
             .recs
@@ -118,7 +118,7 @@ impl Data {
             .fold(f64::NEG_INFINITY, f64::max);
         (lo, hi)
     }
-    /// Shortest block [samples].
+    /// Shortest block \[samples\].
     pub(super) fn block(&self) -> usize {
         self.recs
             .iter()

@@ -9,7 +9,7 @@
 //! ```
 //!
 //! (θ3 ω² and θ5 v ω are second order), stable iff θ4/θ1 > 0 and θ6/θ2 > 0, with time
-//! constants τ_v = θ1/θ4 and τ_ω = θ2/θ6 [s].
+//! constants τ_v = θ1/θ4 and τ_ω = θ2/θ6 \[s\].
 
 use wheelid_core::{BoundState, Recording};
 

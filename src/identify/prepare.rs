@@ -14,7 +14,7 @@ pub(super) struct Prepared<'a> {
     pub restamped: Cow<'a, [Recording]>,
     /// Resampled, aligned and filtered (`wheelid_core::condition`), one per recording.
     pub conditioned: Vec<Conditioned<'a>>,
-    /// The run's cut-off [Hz] and how it was chosen.
+    /// The run's cut-off \[Hz\] and how it was chosen.
     pub cutoff_hz: f64,
     pub cutoff_choice: CutoffChoice,
     /// Lags over which the filtered residuals are correlated (one filter time constant, in

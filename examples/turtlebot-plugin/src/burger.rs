@@ -57,17 +57,17 @@
 /// radius R_t is taken equal to the wheel radius r.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct WheelPdPhysics {
-    /// Mass m [kg].
+    /// Mass m \[kg\].
     pub m: f64,
     /// Moment of inertia about the vertical axis through the centre of mass, I_z [kg·m²].
     pub i_z: f64,
-    /// Distance from the axle to the centre of mass, b [m] (forward positive).
+    /// Distance from the axle to the centre of mass, b \[m\] (forward positive).
     pub b: f64,
-    /// Wheel (and tyre) radius r [m].
+    /// Wheel (and tyre) radius r \[m\].
     pub r: f64,
-    /// Track, the distance between the wheels, d [m].
+    /// Track, the distance between the wheels, d \[m\].
     pub d: f64,
-    /// Armature resistance R_a [Ω].
+    /// Armature resistance R_a \[Ω\].
     pub r_a: f64,
     /// Torque constant at the wheel (gear included), k_a [N·m/A].
     pub k_a: f64,
@@ -123,7 +123,7 @@ impl WheelPdPhysics {
         [v, 2.0 * v / self.d]
     }
 
-    /// The time constant of the passive plant [s]: the body and the motors under a constant
+    /// The time constant of the passive plant \[s\]: the body and the motors under a constant
     /// voltage, (R_a r² m + 2 I_e R_a)/(2 k_a k_b) — what the servo's gains make slower.
     pub fn passive_time_constant(&self) -> f64 {
         (self.r_a * self.r * self.r * self.m + 2.0 * self.i_e * self.r_a)
@@ -133,9 +133,9 @@ impl WheelPdPhysics {
 
 /// Gear ratio of the Dynamixel XL430-W250 (e-Manual).
 pub const XL430_GEAR_RATIO: f64 = 258.5;
-/// Supply voltage of the XL430's rated figures and of the Burger's 3-cell Li-Po [V].
+/// Supply voltage of the XL430's rated figures and of the Burger's 3-cell Li-Po \[V\].
 pub const XL430_VOLTAGE: f64 = 11.1;
-/// XL430 stall current at 11.1 V [A] (e-Manual).
+/// XL430 stall current at 11.1 V \[A\] (e-Manual).
 pub const XL430_STALL_CURRENT: f64 = 1.3;
 /// XL430 stall torque at 11.1 V [N·m] (e-Manual).
 pub const XL430_STALL_TORQUE: f64 = 1.4;
@@ -146,15 +146,15 @@ pub const XL430_VELOCITY_UNIT: f64 = 0.229 * std::f64::consts::TAU / 60.0;
 /// Encoder resolution of the XL430 [ticks per revolution] (12-bit absolute, e-Manual).
 pub const XL430_TICKS_PER_REV: f64 = 4096.0;
 
-/// Wheel radius of the Burger [m].
+/// Wheel radius of the Burger \[m\].
 pub const WHEEL_RADIUS: f64 = 0.033;
-/// Track of the Burger [m].
+/// Track of the Burger \[m\].
 pub const TRACK: f64 = 0.160;
 /// Maximum translational velocity of the Burger [m/s] (e-Manual).
 pub const V_MAX: f64 = 0.22;
 /// Maximum rotational velocity of the Burger [rad/s] (e-Manual).
 pub const W_MAX: f64 = 2.84;
-/// Control and report period of the Burger [s]: the OpenCR firmware (`turtlebot3_core`)
+/// Control and report period of the Burger \[s\]: the OpenCR firmware (`turtlebot3_core`)
 /// updates the motor goal velocities and publishes the drive information at 30 Hz
 /// (`CONTROL_MOTOR_SPEED_FREQUENCY`, `DRIVE_INFORMATION_PUBLISH_FREQUENCY`).
 pub const PERIOD_S: f64 = 1.0 / 30.0;

@@ -44,9 +44,9 @@ use wheelid_models::dynamics::rk4_step;
 
 /// Smoothing ε of the friction's sign: [2 mm/s, 0.01 rad/s] (wheelid's value).
 pub const FRICTION_EPS: [f64; 2] = [0.002, 0.01];
-/// Longest integration sub-step [s].
+/// Longest integration sub-step \[s\].
 pub const MAX_SUBSTEP: f64 = 0.02;
-/// Shortest integration sub-step [s] (a θ that asks for less is not a robot's).
+/// Shortest integration sub-step \[s\] (a θ that asks for less is not a robot's).
 pub const MIN_SUBSTEP: f64 = 1e-4;
 
 /// The eight parameters: eq. 2.19's six (as VwPd names them), then the two friction terms.
@@ -144,7 +144,7 @@ pub fn check_theta(theta: &[f64]) -> Result<[f64; 8]> {
     Ok(th)
 }
 
-/// Integration sub-step for θ [s]: a fifth of the fastest of θ1/θ4, θ2/θ6 and the friction's
+/// Integration sub-step for θ \[s\]: a fifth of the fastest of θ1/θ4, θ2/θ6 and the friction's
 /// θ1 ε_v/θ7, θ2 ε_ω/θ8 (its slope at zero speed), within [[`MIN_SUBSTEP`], [`MAX_SUBSTEP`]].
 pub fn substep(theta: &[f64; 8]) -> f64 {
     let [t1, t2, _, t4, _, t6, t7, t8] = theta.map(f64::abs);

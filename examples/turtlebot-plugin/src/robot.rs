@@ -58,7 +58,7 @@ pub struct TurtleBotSettings {
     /// routes by it; accepted here and not otherwise used.
     #[serde(rename = "type")]
     pub kind: Option<String>,
-    /// Control and report period Δt [s] (default 1/30 s, [`burger::PERIOD_S`]).
+    /// Control and report period Δt \[s\] (default 1/30 s, [`burger::PERIOD_S`]).
     pub period_s: f64,
     /// Seed of the measurement noise.
     pub seed: u64,
@@ -214,7 +214,7 @@ pub struct TurtleBot {
     rng: SplitMix64,
     /// Reports made so far.
     k: u64,
-    /// True state: x, y, ψ, v, ω of the axle centre, wheel angles φ_r, φ_l [rad].
+    /// True state: x, y, ψ, v, ω of the axle centre, wheel angles φ_r, φ_l \[rad\].
     state: [f64; 7],
     /// Encoder ticks (right, left) at the last report.
     ticks: [f64; 2],
@@ -265,7 +265,7 @@ impl TurtleBot {
         self.theta
     }
 
-    /// The true state at the last report: x [m], y [m], ψ [rad], v [m/s], ω [rad/s] of the
+    /// The true state at the last report: x \[m\], y \[m\], ψ \[rad\], v [m/s], ω [rad/s] of the
     /// axle centre.
     pub fn true_state(&self) -> [f64; 5] {
         let s = &self.state;

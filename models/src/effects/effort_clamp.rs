@@ -18,7 +18,7 @@
 //! Unclamped, this is eq. 2.19. μ = 1 for the wheel-PD controller (§2.2: each wheel's loop
 //! sees v ± dω/2); for the v/ω-PD controller (Appendix A.3) the wheel voltages are
 //! K_PT (v_ref − v) ± K_PR (ω_ref − ω), so κ = K_PR/K_PT, fitted as μ. In physical units:
-//! c = V_max r/k_P for the wheel-PD loop (V_max the amplifier's limit [V], r the wheel radius)
+//! c = V_max r/k_P for the wheel-PD loop (V_max the amplifier's limit \[V\], r the wheel radius)
 //! and c = V_max/K_PT for the v/ω-PD loop. The derivative term's share of θ1, θ2 (which also
 //! vanishes while clamped) is taken as small.
 

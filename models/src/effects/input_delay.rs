@@ -10,7 +10,7 @@ static PARAMS: [ParamInfo; 1] = [ParamInfo {
     description: "dead time of the commands",
 }];
 
-/// Dead time τ [s] of the commands (stage 1 of [`Terms`]); null 0, fitted within [0, 2] s,
+/// Dead time τ \[s\] of the commands (stage 1 of [`Terms`]); null 0, fitted within [0, 2] s,
 /// plausible up to 1.5 s.
 #[derive(Debug, Clone, Copy)]
 pub struct InputDelay;

@@ -123,7 +123,7 @@ impl Channel {
 /// Each update takes the counter change Δp (left, right) as the wrapping 32-bit difference, so a
 /// counter that passes 2³¹ − 1 → −2³¹ still gives the right step (as long as a wheel moves less
 /// than 2³¹ pulses, about 100 km, between two reads). Then Δs = (Δr + Δl)/2, Δφ = (Δr − Δl)/d
-/// with Δl, Δr the wheel travels [m], and x += Δs cos φ̄, y += Δs sin φ̄, φ += Δφ with
+/// with Δl, Δr the wheel travels \[m\], and x += Δs cos φ̄, y += Δs sin φ̄, φ += Δφ with
 /// φ̄ = φ + Δφ/2. The pose is that of the axle centre; the heading is not wrapped.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Odometer {
@@ -263,7 +263,7 @@ impl Khepera {
         self.command
     }
 
-    /// The position counters [pulses] of the last `R` answer.
+    /// The position counters \[pulses\] of the last `R` answer.
     pub fn counters(&self) -> Wheels<i32> {
         self.odometer.counters()
     }

@@ -10,8 +10,8 @@
 //! |---------------------|--------------------|-----------------------------------------------|
 //! | `D,l<left>,l<right>` | `d`               | set both wheel speeds [speed units]           |
 //! | `E`                 | `e,<left>,<right>` | read both wheel speeds [speed units]          |
-//! | `R`                 | `r,<left>,<right>` | read both 32-bit position counters [pulses]   |
-//! | `I,l<left>,l<right>` | `i`               | set both position counters [pulses]           |
+//! | `R`                 | `r,<left>,<right>` | read both 32-bit position counters \[pulses\]   |
+//! | `I,l<left>,l<right>` | `i`               | set both position counters \[pulses\]           |
 //! | anything else       | `$`                | not understood (`kh3server`'s error answer)    |
 //!
 //! See the [module docs](super) for the sources and the units.
@@ -60,9 +60,9 @@ pub enum Command {
     SetSpeed(Wheels<i32>),
     /// `E`: read the wheel speeds; answer `e,<left>,<right>` [speed units].
     ReadSpeed,
-    /// `R`: read the position counters; answer `r,<left>,<right>` [pulses].
+    /// `R`: read the position counters; answer `r,<left>,<right>` \[pulses\].
     ReadPosition,
-    /// `I,l<left>,l<right>`: set the position counters [pulses]; answer `i`.
+    /// `I,l<left>,l<right>`: set the position counters \[pulses\]; answer `i`.
     SetPosition(Wheels<i32>),
 }
 
@@ -210,14 +210,14 @@ fn parse_i32_register(s: &str) -> Result<i32, String> {
 /// The conversions between SI and the protocol's units, and the geometry they need.
 ///
 /// Speeds: wheel speed [mm/s] = speed units / `speed_units_per_mm_s`. Positions: wheel travel
-/// [mm] = pulses / `pulses_per_mm`. v = (v_r + v_l)/2, ω = (v_r − v_l)/`track`.
+/// \[mm\] = pulses / `pulses_per_mm`. v = (v_r + v_l)/2, ω = (v_r − v_l)/`track`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Units {
     /// Speed units per mm/s of wheel speed (`Kspeed`).
     pub speed_units_per_mm_s: f64,
     /// Encoder pulses per mm of wheel travel.
     pub pulses_per_mm: f64,
-    /// Track width d [m].
+    /// Track width d \[m\].
     pub track: f64,
     /// Largest wheel speed sent [m/s]; faster wheel commands are clamped to it.
     pub max_wheel_speed: f64,
@@ -300,12 +300,12 @@ impl Units {
         ))
     }
 
-    /// Wheel travel [m] of a pulse count.
+    /// Wheel travel \[m\] of a pulse count.
     pub fn pulses_to_m(&self, pulses: f64) -> f64 {
         pulses / self.pulses_per_mm / 1000.0
     }
 
-    /// Pulses of a wheel travel [m] (not rounded).
+    /// Pulses of a wheel travel \[m\] (not rounded).
     pub fn m_to_pulses(&self, metres: f64) -> f64 {
         metres * 1000.0 * self.pulses_per_mm
     }

@@ -102,11 +102,11 @@ pub struct KheperaSettings {
     /// Serial device path (e.g. `/dev/ttyUSB0`, `COM3`), opened at `baud` 8N1; or
     /// `tcp://host:port` for a TCP–serial bridge or the [`KheperaServer`].
     pub port: String,
-    /// Serial baud rate [Bd] (manual: 115200).
+    /// Serial baud rate \[Bd\] (manual: 115200).
     pub baud: u32,
-    /// Control and sampling period Δt [s] (profile: 0.02 s, the thesis' toolbox loop).
+    /// Control and sampling period Δt \[s\] (profile: 0.02 s, the thesis' toolbox loop).
     pub period_s: f64,
-    /// Longest wait for an answer, and for a TCP connection [s].
+    /// Longest wait for an answer, and for a TCP connection \[s\].
     pub timeout_s: f64,
     /// Whether `read` waits for the next period on the host clock (a real robot); false reads
     /// at once (a [`Pacing::LockStep`] loopback server, where the simulation sets the pace).
@@ -116,7 +116,7 @@ pub struct KheperaSettings {
     /// Encoder pulses per mm of wheel travel (firmware < 3.0: 2764 per 2π·20.5 mm = 21.459;
     /// ≥ 3.0: 1/0.03068 = 32.595).
     pub pulses_per_mm: f64,
-    /// Track width d [m] (profile: 0.0885).
+    /// Track width d \[m\] (profile: 0.0885).
     pub track: f64,
     /// Largest wheel speed commanded [m/s]; faster wheels are clamped (profile: 0.5).
     pub max_wheel_speed: f64,

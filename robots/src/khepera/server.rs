@@ -34,7 +34,7 @@ pub struct ServerStats {
     pub commands: u64,
     /// Simulation periods taken.
     pub steps: u64,
-    /// Simulated time at the end [s].
+    /// Simulated time at the end \[s\].
     pub sim_time_s: f64,
 }
 

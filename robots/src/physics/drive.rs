@@ -68,7 +68,7 @@ impl Drive {
         }
     }
 
-    /// One physics step of `h` seconds: the controller's voltages (right, left) [V] for the
+    /// One physics step of `h` seconds: the controller's voltages (right, left) \[V\] for the
     /// setpoints and the wheel rates now [rad/s] — at every step from the rates extrapolated
     /// to the step's midpoint, or, with a controller period, updated from the rates at its
     /// instants and held — and those midpoint rates, at which the motors are evaluated.
@@ -121,7 +121,7 @@ impl Drive {
         self.rate
     }
 
-    /// Controller voltages (right, left) [V] for the setpoints (v_ref [m/s], ω_ref [rad/s]) and
+    /// Controller voltages (right, left) \[V\] for the setpoints (v_ref [m/s], ω_ref [rad/s]) and
     /// the wheel rates (right, left) [rad/s], one step of `h` seconds after the last call.
     pub fn voltages(&mut self, setpoint: (f64, f64), rates: [f64; 2], h: f64) -> [f64; 2] {
         let (r, d) = (self.p.r, self.p.d);
@@ -149,7 +149,7 @@ impl Drive {
     }
 
     /// Motor torques (right, left) [N·m] on the wheels from the amplifier's output voltages
-    /// `u` [V] and the wheel rates [rad/s] (eq. 2.9–2.10).
+    /// `u` \[V\] and the wheel rates [rad/s] (eq. 2.9–2.10).
     pub fn torques(&self, u: [f64; 2], rates: [f64; 2]) -> [f64; 2] {
         let p = &self.p;
         [0, 1].map(|i| p.k_a / p.r_a * (u[i] - p.k_b * rates[i]) - p.b_e * rates[i])

@@ -37,11 +37,11 @@ pub struct RateLimit {
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct PhysicsEffects {
-    /// Command latency from host to controller [s].
+    /// Command latency from host to controller \[s\].
     pub latency_s: Option<f64>,
     /// Onboard setpoint rate limiter.
     pub rate_limit: Option<RateLimit>,
-    /// Amplifier voltage clamp, per wheel [V].
+    /// Amplifier voltage clamp, per wheel \[V\].
     pub voltage_clamp: Option<f64>,
     /// Drive-gain sag: fraction of the amplifier gain lost, linearly, by the end of the run.
     pub gain_sag: Option<f64>,
@@ -128,8 +128,8 @@ impl PhysicsEffects {
         }
     }
 
-    /// The amplifier's output voltages (right, left) [V] for the controller's `u` [V] at time
-    /// `t` [s] of a run of `duration` [s]: gain sag (linear, held after the run's end) or
+    /// The amplifier's output voltages (right, left) \[V\] for the controller's `u` \[V\] at time
+    /// `t` \[s\] of a run of `duration` \[s\]: gain sag (linear, held after the run's end) or
     /// decay, right-amplifier gain, clamp.
     pub fn amplify(&self, u: [f64; 2], t: f64, duration: f64) -> [f64; 2] {
         let progress = (t / duration).clamp(0.0, 1.0);

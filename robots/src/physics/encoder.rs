@@ -19,7 +19,7 @@ use wheelid_core::{Error, Result};
 /// Quantisation and noise of the two wheel encoders.
 #[derive(Debug, Clone)]
 pub struct Encoders {
-    /// Angle of one tick [rad], or `None` for exact angles.
+    /// Angle of one tick \[rad\], or `None` for exact angles.
     tick: Option<f64>,
     noise: Option<(ChaCha8Rng, Normal<f64>)>,
 }
@@ -56,7 +56,7 @@ impl Encoders {
         })
     }
 
-    /// The angles (right, left) [rad] as the encoders report them.
+    /// The angles (right, left) \[rad\] as the encoders report them.
     pub fn read(&self, angle: [f64; 2]) -> [f64; 2] {
         match self.tick {
             Some(q) => angle.map(|a| (a / q).floor() * q),
@@ -64,7 +64,7 @@ impl Encoders {
         }
     }
 
-    /// A reported wheel speed [m/s]: `rate` [rad/s] × `radius` [m], plus the noise if any.
+    /// A reported wheel speed [m/s]: `rate` [rad/s] × `radius` \[m\], plus the noise if any.
     pub fn speed(&mut self, rate: f64, radius: f64) -> f64 {
         let n = match &mut self.noise {
             Some((rng, n)) => n.sample(rng),

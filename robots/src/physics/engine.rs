@@ -74,11 +74,11 @@ pub struct BodyState {
     pub v: f64,
     /// Yaw rate [rad/s].
     pub w: f64,
-    /// Axle centre x, y [m].
+    /// Axle centre x, y \[m\].
     pub x: f64,
-    /// Axle centre y [m].
+    /// Axle centre y \[m\].
     pub y: f64,
-    /// Heading [rad] (wrapped to (−π, π]).
+    /// Heading \[rad\] (wrapped to (−π, π]).
     pub heading: f64,
 }
 

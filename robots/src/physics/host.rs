@@ -28,15 +28,15 @@ use crate::excitation::Excitation;
 /// What the host saw at one sample instant.
 #[derive(Debug, Clone, Copy)]
 pub(super) struct Raw {
-    /// The sample instant s_k [s].
+    /// The sample instant s_k \[s\].
     pub t: f64,
     /// The command sent at s_k (v_ref [m/s], ω_ref [rad/s]).
     pub command: (f64, f64),
-    /// Wheel angles (right, left) as the encoders report them [rad].
+    /// Wheel angles (right, left) as the encoders report them \[rad\].
     pub angle: [f64; 2],
     /// Instantaneous wheel rates [rad/s].
     pub rate: [f64; 2],
-    /// True axle-centre pose (x [m], y [m], heading [rad]).
+    /// True axle-centre pose (x \[m\], y \[m\], heading \[rad\]).
     pub pose: [f64; 3],
 }
 

@@ -49,7 +49,7 @@ use wheelid_core::{Error, Result, Timing};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct PhysicsSettings {
-    /// Duration [s].
+    /// Duration \[s\].
     pub duration_s: f64,
     /// Seed of the jitter and the noise.
     pub seed: u64,

@@ -20,13 +20,13 @@ use super::PhysicalProfile;
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Payload {
-    /// Mass m_p [kg].
+    /// Mass m_p \[kg\].
     pub mass_kg: f64,
-    /// When it is set down [s] (0: from the start).
+    /// When it is set down \[s\] (0: from the start).
     pub at_s: f64,
-    /// Position of its centre of mass ahead of the wheel axle [m] (on the axis of symmetry).
+    /// Position of its centre of mass ahead of the wheel axle \[m\] (on the axis of symmetry).
     pub x_m: f64,
-    /// Side s of the cube [m] (its own yaw inertia is m_p s²/6).
+    /// Side s of the cube \[m\] (its own yaw inertia is m_p s²/6).
     pub size_m: f64,
 }
 

@@ -46,17 +46,17 @@ pub enum Controller {
 pub struct PhysicalProfile {
     /// Name, e.g. `khepera3`.
     pub name: String,
-    /// Total mass m [kg] (chassis and wheels).
+    /// Total mass m \[kg\] (chassis and wheels).
     pub m: f64,
     /// Total yaw inertia I_z about the centre of mass G [kg·m²].
     pub i_z: f64,
-    /// Offset b of G ahead of the wheel axle [m] (non-zero: the caster sits on G's side).
+    /// Offset b of G ahead of the wheel axle \[m\] (non-zero: the caster sits on G's side).
     pub b: f64,
-    /// Wheel radius r [m] (also the tyre radius R_t: the wheel is a rigid sphere in contact).
+    /// Wheel radius r \[m\] (also the tyre radius R_t: the wheel is a rigid sphere in contact).
     pub r: f64,
-    /// Track d [m].
+    /// Track d \[m\].
     pub d: f64,
-    /// Mass of one wheel [kg] (part of m).
+    /// Mass of one wheel \[kg\] (part of m).
     pub wheel_mass: f64,
     /// Spin inertia of motor, gearbox and wheel reflected to the wheel, I_e [kg·m²].
     pub i_e: f64,
@@ -64,23 +64,23 @@ pub struct PhysicalProfile {
     pub k_a: f64,
     /// Back-EMF constant × gear ratio k_b [V·s/rad].
     pub k_b: f64,
-    /// Armature resistance R_a [Ω].
+    /// Armature resistance R_a \[Ω\].
     pub r_a: f64,
     /// Viscous friction of motor, gearbox and wheel B_e [N·m·s/rad].
     pub b_e: f64,
     /// The onboard controller.
     pub controller: Controller,
-    /// Distance of the caster ahead of the axle [m] (on G's side of the axle).
+    /// Distance of the caster ahead of the axle \[m\] (on G's side of the axle).
     pub caster_x: f64,
-    /// Caster ball radius [m].
+    /// Caster ball radius \[m\].
     pub caster_radius: f64,
     /// Encoder ticks per wheel revolution.
     pub ticks_per_rev: f64,
-    /// Host sample period Δ [s].
+    /// Host sample period Δ \[s\].
     pub period_s: f64,
-    /// Physics step [s], ≤ 1 ms (and ≤ a tenth of the host period).
+    /// Physics step \[s\], ≤ 1 ms (and ≤ a tenth of the host period).
     pub physics_step_s: f64,
-    /// The onboard controller's own period [s], a whole number of physics steps; absent: it
+    /// The onboard controller's own period \[s\], a whole number of physics steps; absent: it
     /// runs at every physics step, as a continuous controller (the maps' assumption).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub controller_period_s: Option<f64>,

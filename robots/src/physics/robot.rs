@@ -50,11 +50,11 @@ pub struct PhysicsRobot {
     /// Index of the current sample instant in `steps`, and the current physics step.
     k: usize,
     j: usize,
-    /// Commands on the link: (arrival time [s], (v_ref, ω_ref)).
+    /// Commands on the link: (arrival time \[s\], (v_ref, ω_ref)).
     queue: VecDeque<(f64, (f64, f64))>,
     command: (f64, f64),
     setpoint: (f64, f64),
-    /// Encoder shaft angles (right, left) [rad], exact.
+    /// Encoder shaft angles (right, left) \[rad\], exact.
     angle: [f64; 2],
     rates: [f64; 2],
     /// Reported wheel angles at the last read (for window averages) and its time.
@@ -105,7 +105,7 @@ impl PhysicsRobot {
         })
     }
 
-    /// Simulation time [s].
+    /// Simulation time \[s\].
     pub fn time(&self) -> f64 {
         self.j as f64 * self.p.physics_step_s
     }

@@ -82,7 +82,7 @@ impl Default for BagTopics {
     }
 }
 
-/// One decoded message: its time [ns] and its content.
+/// One decoded message: its time \[ns\] and its content.
 struct Stamped<T> {
     ns: i64,
     msg: T,
@@ -91,9 +91,9 @@ struct Stamped<T> {
 /// Reads the drive in the ROS 2 bag at `path` (one MCAP file) into a [`Recording`].
 ///
 /// The odometry messages (`nav_msgs/msg/Odometry` on `topics.odometry`) set the sample
-/// instants: t is the time (per `time_source`) since the first of them [s], v =
+/// instants: t is the time (per `time_source`) since the first of them \[s\], v =
 /// `twist.twist.linear.x` [m/s], ω = `twist.twist.angular.z` [rad/s], x, y =
-/// `pose.pose.position` [m], φ the quaternion's yaw [rad], unwrapped. The command at each
+/// `pose.pose.position` \[m\], φ the quaternion's yaw \[rad\], unwrapped. The command at each
 /// instant is the last message on `topics.command` at or before it (zero-order hold; zero
 /// before the first), `geometry_msgs/msg/Twist` or `TwistStamped` as the channel's schema says:
 /// v_ref = `linear.x`, ω_ref = `angular.z`. With `command_timeout_s`, a command older than that

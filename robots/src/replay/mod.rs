@@ -112,7 +112,7 @@ pub struct ReplaySettings {
     /// The clock that times a bag's messages (default `log_time`).
     #[serde(default)]
     pub time_source: TimeSource,
-    /// A command older than this [s] counts as zero, as a ROS base controller stops on a stale
+    /// A command older than this \[s\] counts as zero, as a ROS base controller stops on a stale
     /// `cmd_vel` (diff_drive_controller's `cmd_vel_timeout`); default none: commands hold until
     /// the next one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -342,7 +342,7 @@ impl Robot for Replay {
         "replay"
     }
 
-    /// The recording's median sample period [s].
+    /// The recording's median sample period \[s\].
     fn period_s(&self) -> f64 {
         self.period_s
     }

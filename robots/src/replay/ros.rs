@@ -28,9 +28,9 @@ pub const CDR_LE_HEADER: [u8; 4] = [0x00, 0x01, 0x00, 0x00];
 /// `builtin_interfaces/msg/Time`: `int32 sec`, `uint32 nanosec`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Time {
-    /// Seconds [s].
+    /// Seconds \[s\].
     pub sec: i32,
-    /// Nanoseconds [ns], 0 ≤ nanosec < 10⁹.
+    /// Nanoseconds \[ns\], 0 ≤ nanosec < 10⁹.
     pub nanosec: u32,
 }
 
@@ -68,14 +68,14 @@ pub struct Vector3 {
     pub z: f64,
 }
 
-/// `geometry_msgs/msg/Point`: `float64 x, y, z` [m].
+/// `geometry_msgs/msg/Point`: `float64 x, y, z` \[m\].
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct Point {
-    /// x [m].
+    /// x \[m\].
     pub x: f64,
-    /// y [m].
+    /// y \[m\].
     pub y: f64,
-    /// z [m].
+    /// z \[m\].
     pub z: f64,
 }
 
@@ -93,7 +93,7 @@ pub struct Quaternion {
 }
 
 impl Quaternion {
-    /// The rotation by `yaw` [rad] about z: (0, 0, sin(yaw/2), cos(yaw/2)).
+    /// The rotation by `yaw` \[rad\] about z: (0, 0, sin(yaw/2), cos(yaw/2)).
     pub fn from_yaw(yaw: f64) -> Self {
         let (s, c) = (0.5 * yaw).sin_cos();
         Self {
@@ -104,7 +104,7 @@ impl Quaternion {
         }
     }
 
-    /// The yaw [rad] in (−π, π]: the z-y-x Euler angle ψ = atan2(2(wz + xy), 1 − 2(y² + z²)).
+    /// The yaw \[rad\] in (−π, π]: the z-y-x Euler angle ψ = atan2(2(wz + xy), 1 − 2(y² + z²)).
     ///
     /// Written as atan2(2(wz + xy), w² + x² − y² − z²), equal for a unit quaternion and
     /// unchanged by scaling, so a slightly unnormalised quaternion gives the same yaw.
@@ -117,7 +117,7 @@ impl Quaternion {
 /// `geometry_msgs/msg/Pose`: `Point position`, `Quaternion orientation`.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Pose {
-    /// Position [m].
+    /// Position \[m\].
     pub position: Point,
     /// Orientation.
     pub orientation: Quaternion,
