@@ -29,26 +29,27 @@ pub(super) fn validate_free_run(
     free_run: Option<wheelid_core::FreeRun>,
     quality: &[(f64, f64, usize)],
 ) -> Result<Validation, IdentifyError> {
-    match free_run {
-        Some(f) => validate(
-            model,
-            theta,
-            &data.conditioned,
-            &f.recordings,
-            f.initial.into_iter().map(Some).collect(),
+    let (recordings, initial, offset) = match &free_run {
+        Some(f) => (
+            &f.recordings[..],
+            f.initial.iter().cloned().map(Some).collect(),
             f.offset,
-            quality,
         ),
-        None => validate(
-            model,
-            theta,
-            &data.conditioned,
-            &data.restamped,
+        None => (
+            &data.restamped[..],
             vec![None; data.conditioned.len()],
             None,
-            quality,
         ),
-    }
+    };
+    validate(
+        model,
+        theta,
+        &data.conditioned,
+        recordings,
+        initial,
+        offset,
+        quality,
+    )
 }
 
 /// Simulates `theta` on `recordings` (one per conditioned recording `conditioned`), from the
