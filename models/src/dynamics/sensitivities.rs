@@ -17,14 +17,14 @@ const HALF: usize = NS / 2;
 const SPLIT_SAMPLES: usize = 20_000;
 
 /// Derivative of the augmented state z = (v, ω, S) for commands u, where S holds the `M`
-/// sensitivity columns `off … off + M − 1` of (θ1…θ6, v0, ω0), row-major (∂v/∂p…, ∂ω/∂p…).
+/// sensitivity columns `OFF … OFF + M − 1` (constants, so that each column's explicit term is
+/// chosen when compiling, not per stage) of (θ1…θ6, v0, ω0), row-major (∂v/∂p…, ∂ω/∂p…).
 /// Each column's derivative depends only on (v, ω) and itself, so any split of the columns
 /// gives the same numbers.
 #[inline]
-fn augmented_rhs<const M: usize, const Z: usize>(
+fn augmented_rhs<const M: usize, const Z: usize, const OFF: usize>(
     theta: &[f64; 6],
     inv: [f64; 2],
-    off: usize,
     z: &[f64; Z],
     u: (f64, f64),
 ) -> [f64; Z] {
@@ -47,7 +47,7 @@ fn augmented_rhs<const M: usize, const Z: usize>(
         out[2 + j] = a[0][0] * sv + a[0][1] * sw;
         out[2 + M + j] = a[1][0] * sv + a[1][1] * sw;
         // The explicit ∂f/∂θ of eq. 2.19 (module doc), for the columns this group holds.
-        match off + j {
+        match OFF + j {
             0 => out[2 + j] += -dv * i1,
             1 => out[2 + M + j] += -dw * i2,
             2 => out[2 + j] += w * w * i1,
@@ -60,13 +60,12 @@ fn augmented_rhs<const M: usize, const Z: usize>(
     out
 }
 
-/// Integrates (v, ω) with the sensitivity columns `off … off + M − 1` (state length Z =
+/// Integrates (v, ω) with the sensitivity columns `OFF … OFF + M − 1` (state length Z =
 /// 2 + 2M) by the sub-steps of [`simulate`], handing each sample's (v, ω, S) — window
 /// averages when the recording has them — to `sink(k, z)`.
-fn integrate_columns<const M: usize, const Z: usize>(
+fn integrate_columns<const M: usize, const Z: usize, const OFF: usize>(
     setup: &Setup,
     rec: &Recording,
-    off: usize,
     mut sink: impl FnMut(usize, &[f64; Z]),
 ) {
     let Setup {
@@ -81,15 +80,15 @@ fn integrate_columns<const M: usize, const Z: usize>(
     z[0] = v0;
     z[1] = w0;
     // ∂v/∂v0 and ∂ω/∂ω0 start at 1, where this group holds them.
-    if (off..off + M).contains(&6) {
-        z[2 + 6 - off] = 1.0;
+    if (OFF..OFF + M).contains(&6) {
+        z[2 + 6 - OFF] = 1.0;
     }
-    if (off..off + M).contains(&7) {
-        z[2 + M + 7 - off] = 1.0;
+    if (OFF..OFF + M).contains(&7) {
+        z[2 + M + 7 - OFF] = 1.0;
     }
     sink(0, &z);
     let inv = [1.0 / th[0], 1.0 / th[1]];
-    let f = |z: &[f64; Z], u: (f64, f64)| augmented_rhs::<M, Z>(&th, inv, off, z, u);
+    let f = |z: &[f64; Z], u: (f64, f64)| augmented_rhs::<M, Z, OFF>(&th, inv, z, u);
     for k in 1..n {
         let mut q = [0.0; Z];
         let span = for_each_substep(rec, k, hold, &th, |u0, u1, h, exponential| {
@@ -162,7 +161,7 @@ pub(super) fn sensitivities_on_one_thread(
     rec: &Recording,
 ) -> ([Vec<f64>; 2], Sensitivities) {
     let (mut y, [mut tv, mut tw, mut iv, mut iw]) = empty_columns(setup.n);
-    integrate_columns::<NS, { 2 + 2 * NS }>(setup, rec, 0, |k, z| {
+    integrate_columns::<NS, { 2 + 2 * NS }, 0>(setup, rec, |k, z| {
         y[0][k] = z[0];
         y[1][k] = z[1];
         for j in 0..NS {
@@ -192,7 +191,7 @@ pub(super) fn sensitivities_on_two_threads(
         let (y, iv, iw) = (&mut y, &mut iv, &mut iw);
         rayon::join(
             || {
-                integrate_columns::<HALF, { 2 + 2 * HALF }>(setup, rec, 0, |k, z| {
+                integrate_columns::<HALF, { 2 + 2 * HALF }, 0>(setup, rec, |k, z| {
                     y[0][k] = z[0];
                     y[1][k] = z[1];
                     for j in 0..HALF {
@@ -202,7 +201,7 @@ pub(super) fn sensitivities_on_two_threads(
                 })
             },
             || {
-                integrate_columns::<HALF, { 2 + 2 * HALF }>(setup, rec, HALF, |k, z| {
+                integrate_columns::<HALF, { 2 + 2 * HALF }, HALF>(setup, rec, |k, z| {
                     for j in 0..HALF {
                         let (sv, sw) = (z[2 + j], z[2 + HALF + j]);
                         if HALF + j < 6 {

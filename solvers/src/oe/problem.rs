@@ -1,0 +1,405 @@
+//! The output-error least-squares problem in the minimiser's variables u = (u_θ, x0_1, …):
+//! its residuals (one simulation per recording), its normal equations (one simulation with
+//! sensitivities, summed without forming the Jacobian) and, at θ̂, its Jacobian.
+
+use std::cell::RefCell;
+
+use nalgebra::{DMatrix, DVector};
+use wheelid_core::{DynamicModel, Recording, Sensitivities, Simulation};
+
+use super::lm::NormalProblem;
+use super::transform::Transform;
+
+/// Raw residuals y − ŷ per recording and channel, every sample.
+pub(super) type Raw = Vec<Vec<Vec<f64>>>;
+
+/// One central-difference column: parameter index, step, outputs at +step and −step.
+type FdColumn = (usize, f64, Vec<Vec<f64>>, Vec<Vec<f64>>);
+
+/// Rows of the normal equations summed per task (a fixed split: the sums, and so θ̂, are the
+/// same bits whatever the number of threads).
+const GRAM_CHUNK: usize = 8192;
+
+/// The output-error problem: parameters u = (u_θ, x0_1, …).
+pub(super) struct Problem<'a, M: ?Sized> {
+    pub model: &'a M,
+    pub recs: &'a [Recording],
+    /// 1/σ_c per channel.
+    pub weight: Vec<f64>,
+    pub transform: Vec<Transform>,
+    /// Initial states when they are not estimated.
+    pub fixed_initial: Option<Vec<Vec<f64>>>,
+    /// The start.
+    pub u0: DVector<f64>,
+    /// Offsets of each recording's rows (its samples in the cost, both channels).
+    pub offsets: Vec<usize>,
+    /// Per recording, the samples that enter the cost (the mask's), in time order: row
+    /// `offsets[r] + i·s + c` is sample `index[r][i]`, channel c.
+    pub index: Vec<Vec<usize>>,
+    /// Per recording, whether each sample enters the cost.
+    pub mask: Vec<Vec<bool>>,
+    /// Forward instead of central differences.
+    pub forward: bool,
+    pub rows: usize,
+    /// The last sensitivities (per recording) and the u they were taken at: a new pass at the
+    /// same u and the covariance at θ̂ use them.
+    pub last_sensitivities: RefCell<Option<(DVector<f64>, Vec<Sensitivities>)>>,
+    /// The simulations of the last residual evaluation and the u they were run at: the base of
+    /// the next forward-difference Jacobian, which the minimiser asks for at that u.
+    pub last_simulation: RefCell<Option<(DVector<f64>, Vec<Simulation>)>>,
+}
+
+/// The measured output columns of a recording, in channel order (v, ω).
+pub(super) fn measured(rec: &Recording) -> [&[f64]; 2] {
+    [&rec.v, &rec.w]
+}
+
+impl<M: DynamicModel + ?Sized> Problem<'_, M> {
+    pub fn p(&self) -> usize {
+        self.transform.len()
+    }
+    pub fn nch(&self) -> usize {
+        self.model.channels().len()
+    }
+    /// Unknowns: θ, then each recording's initial state when estimated.
+    pub fn unknowns(&self) -> usize {
+        self.u0.len()
+    }
+    pub fn theta_of(&self, u: &DVector<f64>) -> Vec<f64> {
+        self.transform
+            .iter()
+            .zip(u.iter())
+            .map(|(t, &x)| t.theta(x))
+            .collect()
+    }
+    pub fn initial_of(&self, u: &DVector<f64>, r: usize) -> Vec<f64> {
+        match &self.fixed_initial {
+            Some(x) => x[r].clone(),
+            None => {
+                let (p, s) = (self.p(), self.nch());
+                u.as_slice()[p + r * s..p + (r + 1) * s].to_vec()
+            }
+        }
+    }
+    /// Unweighted residuals y − ŷ per recording and channel, or `None` if a simulation failed
+    /// or diverged.
+    pub fn raw_residuals(&self, u: &DVector<f64>) -> Option<Raw> {
+        let theta = self.theta_of(u);
+        let mut out = Vec::with_capacity(self.recs.len());
+        let mut sims = Vec::with_capacity(self.recs.len());
+        for (r, rec) in self.recs.iter().enumerate() {
+            let sim = self
+                .model
+                .simulate(&theta, rec, &self.initial_of(u, r))
+                .ok()?;
+            let meas = measured(rec);
+            let mut per = Vec::with_capacity(sim.len());
+            for (c, y) in sim.iter().enumerate() {
+                if y.len() != rec.len() || y.iter().any(|x| !x.is_finite()) {
+                    return None;
+                }
+                per.push(meas[c].iter().zip(y).map(|(m, s)| m - s).collect());
+            }
+            out.push(per);
+            sims.push(sim);
+        }
+        if self.forward {
+            self.last_simulation.replace(Some((u.clone(), sims)));
+        }
+        Some(out)
+    }
+    /// The weighted residual rows of `raw`: the cost's rows in order.
+    pub fn weighted_rows(&self, raw: &Raw) -> DVector<f64> {
+        let s = self.nch();
+        let mut e = DVector::zeros(self.rows);
+        for (r, per) in raw.iter().enumerate() {
+            for (c, ec) in per.iter().enumerate() {
+                for (i, &k) in self.index[r].iter().enumerate() {
+                    e[self.offsets[r] + i * s + c] = self.weight[c] * ec[k];
+                }
+            }
+        }
+        e
+    }
+    /// Runs of consecutive samples in the cost, as (first row, samples): the lags of the
+    /// long-run covariance stay inside them.
+    pub fn spans(&self) -> Vec<(usize, usize)> {
+        let s = self.nch();
+        let mut spans: Vec<(usize, usize)> = Vec::new();
+        for (&o, ix) in self.offsets.iter().zip(&self.index) {
+            for (i, &k) in ix.iter().enumerate() {
+                match spans.last_mut() {
+                    Some((start, n))
+                        if i > 0 && ix[i - 1] + 1 == k && *start + *n * s == o + i * s =>
+                    {
+                        *n += 1
+                    }
+                    _ => spans.push((o + i * s, 1)),
+                }
+            }
+        }
+        spans
+    }
+    /// ∂ŷ/∂θ and ∂ŷ/∂x0 of every recording at u, into the cache: the cached ones when they
+    /// were taken within `reuse` ‖u‖ of u (0: at u exactly), else new ones; `None` if a
+    /// simulation fails or a value is not finite.
+    pub fn sensitivities_at(&self, u: &DVector<f64>, reuse: f64) -> Option<()> {
+        let near = |at: &DVector<f64>| at == u || (at - u).norm() <= reuse * u.norm();
+        if matches!(&*self.last_sensitivities.borrow(), Some((at, _)) if near(at)) {
+            return Some(());
+        }
+        // Not held through the peak of the new ones.
+        self.last_sensitivities.replace(None);
+        let theta = self.theta_of(u);
+        let mut cached = match self.last_simulation.take() {
+            Some((at, sims)) if at == *u => sims.into_iter().map(Some).collect(),
+            _ => vec![None; self.recs.len()],
+        };
+        let mut all = Vec::with_capacity(self.recs.len());
+        for (r, rec) in self.recs.iter().enumerate() {
+            let sens = self.sensitivities(&theta, &self.initial_of(u, r), rec, cached[r].take())?;
+            let finite = |m: &DMatrix<f64>| m.iter().all(|x| x.is_finite());
+            if !(sens.theta.iter().all(finite) && sens.initial.iter().all(finite)) {
+                return None;
+            }
+            all.push(sens);
+        }
+        self.last_sensitivities.replace(Some((u.clone(), all)));
+        Some(())
+    }
+    /// ∂ŷ/∂θ and ∂ŷ/∂x0 of recording `rec` (per channel n × p and n × s), the model's own
+    /// when it has them (used as returned, not copied), else by differences.
+    fn sensitivities(
+        &self,
+        theta: &[f64],
+        x0: &[f64],
+        rec: &Recording,
+        cached: Option<Simulation>,
+    ) -> Option<Sensitivities> {
+        if let Ok(Some((_, sens))) = self.model.simulate_with_sensitivities(theta, rec, x0) {
+            return Some(sens);
+        }
+        self.difference_sensitivities(theta, x0, rec, cached)
+    }
+    /// Central differences (forward ones when asked, from the `cached` simulation at θ), step
+    /// ~ 1e-5 relative (above the integrator's sub-step jitter), the columns shared out over
+    /// the available cores.
+    fn difference_sensitivities(
+        &self,
+        theta: &[f64],
+        x0: &[f64],
+        rec: &Recording,
+        cached: Option<Simulation>,
+    ) -> Option<Sensitivities> {
+        let (p, s, n) = (self.p(), self.nch(), rec.len());
+        let scale = theta.iter().fold(0.0f64, |a, x| a.max(x.abs())).max(1e-12);
+        let base_sim = match (self.forward, cached) {
+            (true, Some(sim)) => Some(sim),
+            (true, None) => Some(self.model.simulate(theta, rec, x0).ok()?),
+            (false, _) => None,
+        };
+        let column = |j: usize| -> Option<FdColumn> {
+            let mut th = theta.to_vec();
+            let mut x = x0.to_vec();
+            let base = if j < p { th[j] } else { x[j - p] };
+            let h = 1e-5 * (base.abs() + 1e-3 * scale);
+            let mut eval = |delta: f64| {
+                if j < p {
+                    th[j] = base + delta;
+                } else {
+                    x[j - p] = base + delta;
+                }
+                self.model.simulate(&th, rec, &x).ok()
+            };
+            let up = eval(h)?;
+            match &base_sim {
+                // (up − base)/h written as (up − dn)/(2h) with dn = 2 base − up.
+                Some(b) => {
+                    let dn = up
+                        .iter()
+                        .zip(b)
+                        .map(|(u, b)| u.iter().zip(b).map(|(u, b)| 2.0 * b - u).collect())
+                        .collect();
+                    Some((j, h, up, dn))
+                }
+                None => Some((j, h, up, eval(-h)?)),
+            }
+        };
+        let workers = std::thread::available_parallelism()
+            .map_or(1, |n| n.get())
+            .clamp(1, p + s);
+        let done: Vec<Option<FdColumn>> = std::thread::scope(|scope| {
+            let handles: Vec<_> = (0..workers)
+                .map(|w| {
+                    let column = &column;
+                    scope.spawn(move || (w..p + s).step_by(workers).map(column).collect::<Vec<_>>())
+                })
+                .collect();
+            // A worker that panicked (inside a model) counts as a failed simulation.
+            handles
+                .into_iter()
+                .flat_map(|h| h.join().unwrap_or_else(|_| vec![None]))
+                .collect()
+        });
+        let mut out = Sensitivities {
+            theta: vec![DMatrix::zeros(n, p); s],
+            initial: vec![DMatrix::zeros(n, s); s],
+        };
+        for item in done {
+            let (j, h, up, dn) = item?;
+            for c in 0..s {
+                let (m, col) = if j < p {
+                    (&mut out.theta[c], j)
+                } else {
+                    (&mut out.initial[c], j - p)
+                };
+                for k in 0..n {
+                    m[(k, col)] = (up[c][k] - dn[c][k]) / (2.0 * h);
+                }
+            }
+        }
+        Some(out)
+    }
+    /// Columns of the Jacobian: θ's, then the estimated initial states.
+    pub fn columns(&self) -> usize {
+        self.p()
+            + self
+                .fixed_initial
+                .as_ref()
+                .map_or(self.nch() * self.recs.len(), |_| 0)
+    }
+    /// The weighted Jacobian of the residuals with respect to (θ, x0) — not u — time-major
+    /// rows, from the sensitivities at u (the cached ones if taken within `reuse` ‖u‖).
+    pub fn jacobian_theta(&self, u: &DVector<f64>, reuse: f64) -> Option<DMatrix<f64>> {
+        self.sensitivities_at(u, reuse)?;
+        let (p, s) = (self.p(), self.nch());
+        let mut jac = DMatrix::zeros(self.rows, self.columns());
+        let cache = self.last_sensitivities.borrow();
+        let (_, all) = cache.as_ref()?;
+        for (r, sens) in all.iter().enumerate() {
+            let channels = sens.theta.iter().zip(&sens.initial).zip(&self.weight);
+            // Column by column (both matrices are column-major): row offsets[r] + i·s + c of
+            // column j is −w_c ∂ŷ_c(t_k)/∂(θ, x0)_j, k = index[r][i].
+            for (c, ((st, si), &w)) in channels.enumerate() {
+                let mut fill = |col: usize, src: &[f64]| {
+                    let dst = &mut jac.column_mut(col);
+                    for (i, &k) in self.index[r].iter().enumerate() {
+                        dst[self.offsets[r] + i * s + c] = -w * src[k];
+                    }
+                };
+                let n = st.nrows();
+                for j in 0..p {
+                    fill(j, &st.as_slice()[j * n..(j + 1) * n]);
+                }
+                if self.fixed_initial.is_none() {
+                    for i in 0..s {
+                        fill(p + r * s + i, &si.as_slice()[i * n..(i + 1) * n]);
+                    }
+                }
+            }
+        }
+        Some(jac)
+    }
+    /// JᵀJ and Jᵀe in u of the weighted residuals `raw`, from the cached sensitivities at u,
+    /// recording by recording and channel by channel (module doc of [`super::lm`]).
+    fn normal_equations_at(&self, u: &DVector<f64>, raw: &Raw) -> (DMatrix<f64>, DVector<f64>) {
+        let (p, s, cols) = (self.p(), self.nch(), self.columns());
+        let mut a = DMatrix::zeros(cols, cols);
+        let mut g = DVector::zeros(cols);
+        let cache = self.last_sensitivities.borrow();
+        let Some((_, all)) = cache.as_ref() else {
+            return (a, g);
+        };
+        // dθ/du for the θ columns; the x0 columns are u's own.
+        let chain: Vec<f64> = (0..p).map(|j| self.transform[j].dtheta_du(u[j])).collect();
+        for (r, sens) in all.iter().enumerate() {
+            // Global column of each local one (θ…, then this recording's x0 when estimated).
+            let mut global: Vec<usize> = (0..p).collect();
+            if self.fixed_initial.is_none() {
+                global.extend((0..s).map(|i| p + r * s + i));
+            }
+            for (c, (st, si)) in sens.theta.iter().zip(&sens.initial).enumerate() {
+                let n = st.nrows();
+                let mut locals: Vec<&[f64]> =
+                    (0..p).map(|j| &st.as_slice()[j * n..(j + 1) * n]).collect();
+                if self.fixed_initial.is_none() {
+                    locals.extend((0..s).map(|i| &si.as_slice()[i * n..(i + 1) * n]));
+                }
+                let (la, lg) = gram(&locals, &raw[r][c], &self.index[r]);
+                // J = −w ∂ŷ/∂(θ, x0)·chain, e = w·raw: JᵀJ = w² chain² Σ s sᵀ, Jᵀe = −w² chain Σ s·raw.
+                let w2 = self.weight[c] * self.weight[c];
+                let factor = |a: usize| if a < p { chain[a] } else { 1.0 };
+                let m = locals.len();
+                for a_ in 0..m {
+                    g[global[a_]] -= w2 * factor(a_) * lg[a_];
+                    for b_ in 0..m {
+                        let (lo, hi) = (a_.min(b_), a_.max(b_));
+                        a[(global[a_], global[b_])] +=
+                            w2 * factor(a_) * factor(b_) * la[lo * m + hi];
+                    }
+                }
+            }
+        }
+        (a, g)
+    }
+}
+
+/// Σ_k s_k s_kᵀ (upper triangle, row-major m × m) and Σ_k s_k e_k over the samples `index`,
+/// s_k = (cols[0][k], …): on the available cores in fixed chunks summed in order.
+fn gram(cols: &[&[f64]], e: &[f64], index: &[usize]) -> (Vec<f64>, Vec<f64>) {
+    use rayon::prelude::*;
+    let m = cols.len();
+    let parts: Vec<(Vec<f64>, Vec<f64>)> = index
+        .par_chunks(GRAM_CHUNK)
+        .map(|chunk| {
+            let (mut a, mut g, mut row) = (vec![0.0; m * m], vec![0.0; m], vec![0.0; m]);
+            for &k in chunk {
+                for (x, c) in row.iter_mut().zip(cols) {
+                    *x = c[k];
+                }
+                for i in 0..m {
+                    let ri = row[i];
+                    g[i] += ri * e[k];
+                    for j in i..m {
+                        a[i * m + j] += ri * row[j];
+                    }
+                }
+            }
+            (a, g)
+        })
+        .collect();
+    let (mut a, mut g) = (vec![0.0; m * m], vec![0.0; m]);
+    for (pa, pg) in parts {
+        a.iter_mut().zip(pa).for_each(|(x, y)| *x += y);
+        g.iter_mut().zip(pg).for_each(|(x, y)| *x += y);
+    }
+    (a, g)
+}
+
+impl<M: DynamicModel + ?Sized> NormalProblem for Problem<'_, M> {
+    type Point = Raw;
+
+    fn evaluate(&self, u: &DVector<f64>) -> Option<Raw> {
+        self.raw_residuals(u)
+    }
+
+    fn cost(&self, raw: &Raw) -> f64 {
+        let mut f = 0.0;
+        for (r, per) in raw.iter().enumerate() {
+            for (c, ec) in per.iter().enumerate() {
+                let w2 = self.weight[c] * self.weight[c];
+                f += w2 * self.index[r].iter().map(|&k| ec[k] * ec[k]).sum::<f64>();
+            }
+        }
+        f
+    }
+
+    fn normal_equations(
+        &self,
+        u: &DVector<f64>,
+        raw: &Raw,
+    ) -> Option<(DMatrix<f64>, DVector<f64>)> {
+        self.sensitivities_at(u, 0.0)?;
+        Some(self.normal_equations_at(u, raw))
+    }
+}
