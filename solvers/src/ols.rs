@@ -104,26 +104,33 @@ const QR_BLOCK: usize = 4096;
 /// The triangular factor R ((k+1) × (k+1)) of [X̃ | y] = Q R, X̃ = X D⁻¹, by Householder QR of
 /// row blocks: each block is stacked under the R so far and reduced again (a row-blocked
 /// "TSQR", Demmel et al. 2012; as stable as one Householder QR), with the rows split between
-/// the available cores and their factors combined by one more QR.
-fn tall_r(x: &DMatrix<f64>, y: &DVector<f64>, scales: &DVector<f64>) -> DMatrix<f64> {
-    let (n, k) = x.shape();
+/// the available cores and their factors combined by one more QR. Row q of [X | y] (n rows,
+/// X unscaled) is what `row(q, out)` writes into `out` (k + 1 values): the rows are read where
+/// they lie, never gathered into an n × (k + 1) matrix.
+fn tall_r(
+    n: usize,
+    k: usize,
+    scales: &DVector<f64>,
+    row: &(impl Fn(usize, &mut [f64]) + Sync),
+) -> DMatrix<f64> {
     let threads = rayon::current_num_threads().clamp(1, (n / (16 * QR_BLOCK)).max(1));
     let part = n.div_ceil(threads);
     let reduce = |rows: std::ops::Range<usize>| {
         let mut r = DMatrix::<f64>::zeros(0, k + 1);
         let mut start = rows.start;
+        let mut buf = vec![0.0; k + 1];
         while start < rows.end {
             let len = QR_BLOCK.min(rows.end - start);
             let top = r.nrows();
-            let block = DMatrix::from_fn(top + len, k + 1, |i, j| {
-                if i < top {
-                    r[(i, j)]
-                } else if j < k {
-                    x[(start + i - top, j)] / scales[j]
-                } else {
-                    y[start + i - top]
+            let mut block = DMatrix::<f64>::zeros(top + len, k + 1);
+            block.view_mut((0, 0), (top, k + 1)).copy_from(&r);
+            for i in 0..len {
+                row(start + i, &mut buf);
+                for j in 0..k {
+                    block[(top + i, j)] = buf[j] / scales[j];
                 }
-            });
+                block[(top + i, k)] = buf[k];
+            }
             r = block.qr().r();
             start += len;
         }
@@ -150,13 +157,33 @@ fn tall_r(x: &DMatrix<f64>, y: &DVector<f64>, scales: &DVector<f64>) -> DMatrix<
 }
 
 pub(crate) fn decompose(p: &LinearProblem<'_>, rank_tol: f64) -> Result<Decomposition, SolveError> {
-    let k = p.x.ncols();
-    let scales = column_scales(p.x);
-    let r = tall_r(p.x, p.y, &scales);
+    let (n, k) = p.x.shape();
+    let row = |q: usize, out: &mut [f64]| {
+        for (j, o) in out[..k].iter_mut().enumerate() {
+            *o = p.x[(q, j)];
+        }
+        out[k] = p.y[q];
+    };
+    decompose_rows(n, p.names, column_scales(p.x), rank_tol, &row)
+}
+
+/// [`decompose`] of the n rows of [X | y] that `row(q, out)` writes (k + 1 values, X
+/// unscaled), given X's column norms `scales` (k) and its columns' `names` (k).
+///
+/// # Errors
+/// As [`decompose`].
+pub(crate) fn decompose_rows(
+    n: usize,
+    names: &[&str],
+    scales: DVector<f64>,
+    rank_tol: f64,
+    row: &(impl Fn(usize, &mut [f64]) + Sync),
+) -> Result<Decomposition, SolveError> {
+    let k = scales.len();
+    let r = tall_r(n, k, &scales, row);
     if r.nrows() < k {
         return Err(SolveError::InvalidProblem(format!(
-            "{} samples cannot determine {k} parameters",
-            p.x.nrows()
+            "{n} samples cannot determine {k} parameters"
         )));
     }
     let svd = r.view((0, 0), (k, k)).into_owned().svd(true, true);
@@ -179,8 +206,7 @@ pub(crate) fn decompose(p: &LinearProblem<'_>, rank_tol: f64) -> Result<Decompos
             }
         }
         return Err(SolveError::RankDeficient {
-            names: p
-                .names
+            names: names
                 .iter()
                 .zip(involved)
                 .filter(|(_, f)| *f)
@@ -241,6 +267,46 @@ pub(crate) fn covariance(
 pub(crate) fn bartlett_meat(g: &DMatrix<f64>, lags: usize) -> DMatrix<f64> {
     let (n, k) = g.shape();
     bartlett_meat_with(n, k, lags, |t, j| g[(t, j)])
+}
+
+/// [`bartlett_meat`] of the rows g_t that `g(t, out)` writes (k values each, t < n), each
+/// computed once: the last L + 1 are kept to leave the moving window.
+pub(crate) fn bartlett_meat_rows(
+    n: usize,
+    k: usize,
+    lags: usize,
+    mut g: impl FnMut(usize, &mut [f64]),
+) -> DMatrix<f64> {
+    let mut ring = vec![0.0; (lags + 1) * k];
+    let mut m = DMatrix::<f64>::zeros(k, k);
+    let mut window = vec![0.0; k];
+    for enter in 0..n + lags {
+        let slot = enter % (lags + 1);
+        // The slot held row enter − (L + 1), which leaves the window now.
+        if enter > lags {
+            for (b, x) in window.iter_mut().zip(&ring[slot * k..(slot + 1) * k]) {
+                *b -= x;
+            }
+        }
+        if enter < n {
+            let row = &mut ring[slot * k..(slot + 1) * k];
+            g(enter, row);
+            for (b, x) in window.iter_mut().zip(row.iter()) {
+                *b += x;
+            }
+        }
+        for a in 0..k {
+            for b in a..k {
+                m[(a, b)] += window[a] * window[b];
+            }
+        }
+    }
+    for a in 0..k {
+        for b in 0..a {
+            m[(a, b)] = m[(b, a)];
+        }
+    }
+    m / (lags + 1) as f64
 }
 
 /// [`bartlett_meat`] of the rows g_t[j] = `g(t, j)`, t < n, j < k, never stored.
@@ -335,6 +401,13 @@ mod tests {
             let g = DMatrix::from_fn(n, 3, |t, j| u[(t, j)] * e[t]);
             let fast = bartlett_meat(&g, lags);
             assert_relative_eq!(fast, direct, max_relative = 1e-12, epsilon = 1e-9);
+            // The row-at-a-time form with its ring of the last L + 1 rows.
+            let rows = bartlett_meat_rows(n, 3, lags, |t, out| {
+                for (j, o) in out.iter_mut().enumerate() {
+                    *o = g[(t, j)];
+                }
+            });
+            assert_relative_eq!(rows, direct, max_relative = 1e-12, epsilon = 1e-9);
         }
     }
 

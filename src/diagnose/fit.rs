@@ -336,7 +336,7 @@ pub(super) fn current_of(
         covariance,
         initial: fit.initial.clone(),
         sim,
-        jacobian: Some(data.frame().weigh(&fit.jacobian)),
+        jacobian: fit.jacobian.as_ref().map(|j| data.frame().weigh(j)),
     })
 }
 

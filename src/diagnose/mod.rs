@@ -416,7 +416,7 @@ pub fn diagnose_observed(
         covariance: nominal_fit.covariance.clone(),
         initial: nominal_fit.initial.clone(),
         sim,
-        jacobian: Some(data.frame().weigh(&nominal_fit.jacobian)),
+        jacobian: nominal_fit.jacobian.as_ref().map(|j| data.frame().weigh(j)),
     };
     let nominal = data.stage(&cur);
     progress.step("testing the residuals", 1);

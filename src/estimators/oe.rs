@@ -22,6 +22,8 @@ impl Estimator for Oe {
     fn estimate(&self, input: &EstimatorInput<'_>) -> Result<Estimate, SolveError> {
         let oe = OutputError {
             bounds: input.bounds.map(<[_]>::to_vec),
+            // identify reports θ̂ and its errors; no n × P Jacobian is needed.
+            keep_jacobian: false,
             ..OutputError::default()
         };
         let timed = fit_with_timing(input.model, input.recordings, input.start, &oe)?;

@@ -95,6 +95,10 @@ pub struct OutputError {
     /// Samples of the head problem a long fit starts from (module doc, *Long recordings*);
     /// `None`: always start from the θ given. Default [`WARM_START_SAMPLES`].
     pub warm_start: Option<usize>,
+    /// Hand back the Jacobian at θ̂ ([`OutputErrorFit::jacobian`]; default): rows × unknowns,
+    /// 128 MB for 10⁶ samples. Without it the covariance reads the sensitivities where they
+    /// lie and no rows × unknowns matrix is formed.
+    pub keep_jacobian: bool,
 }
 
 impl Default for OutputError {
@@ -108,6 +112,7 @@ impl Default for OutputError {
             mask: None,
             forward_differences: false,
             warm_start: Some(WARM_START_SAMPLES),
+            keep_jacobian: true,
         }
     }
 }
@@ -143,8 +148,9 @@ pub struct OutputErrorFit {
     /// k of recording r, then channel c — the rows of the cost in order), columns θ then each
     /// recording's initial state (when estimated). Rows × (p + channels · recordings). It is
     /// the Jacobian the covariance was computed from; a caller that tests the residual against
-    /// other directions (a score test) projects it out without simulating again.
-    pub jacobian: DMatrix<f64>,
+    /// other directions (a score test) projects it out without simulating again. `None` when
+    /// [`OutputError::keep_jacobian`] is off.
+    pub jacobian: Option<DMatrix<f64>>,
     /// Wall time of the fit \[s\].
     pub seconds: f64,
 }

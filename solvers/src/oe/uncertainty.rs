@@ -2,10 +2,8 @@
 //! [`super`] (Newey–West weights over the residuals' correlation length), the channels' noise
 //! levels and the bound states.
 
-use std::borrow::Cow;
-
 use nalgebra::{DMatrix, DVector};
-use wheelid_core::{BoundState, DynamicModel, LinearProblem, Recording, SolveError, SolveStatus};
+use wheelid_core::{BoundState, DynamicModel, Recording, Sensitivities, SolveError, SolveStatus};
 
 use super::lm::Termination;
 use super::problem::{Problem, Raw};
@@ -19,8 +17,9 @@ use crate::ols;
 const JACOBIAN_REUSE: f64 = 1e-4;
 
 /// The fit at the problem's θ̂: the sandwich covariance (module doc) from the last
-/// iteration's Jacobian when it was taken there, else a new one; `evaluations` and
-/// `seconds` are the caller's to fill.
+/// iteration's sensitivities when they were taken there, else new ones, read where they lie
+/// (the weighted Jacobian is formed only when [`OutputError::keep_jacobian`] asks for it);
+/// `evaluations` and `seconds` are the caller's to fill.
 pub(super) fn uncertainty<M: DynamicModel + ?Sized>(
     settings: &OutputError,
     problem: Problem<'_, M>,
@@ -31,21 +30,17 @@ pub(super) fn uncertainty<M: DynamicModel + ?Sized>(
     let (model, recordings) = (problem.model, problem.recs);
     let (p, s) = (problem.p(), problem.nch());
     let (rows, unknowns) = (problem.rows, problem.unknowns());
-    let active = rows;
     let status = match termination {
         Termination::LostPatience => SolveStatus::IterationLimit,
         Termination::NoImprovementPossible => SolveStatus::AlmostSolved,
         Termination::Converged => SolveStatus::Solved,
     };
-    // Uncertainty at θ̂ (module doc), with the sensitivities of the last iteration if they
-    // were taken at θ̂ or within the last, converged step of it.
     let theta = problem.theta_of(&u);
-    let noise_std = channel_std(raw, &problem.mask, active, unknowns);
-    let jac = problem
-        .jacobian_theta(&u, JACOBIAN_REUSE)
-        .ok_or_else(|| SolveError::Numerical("non-finite sensitivities at θ̂".into()))?;
-    // Not held beside the Jacobian's copies below.
-    problem.last_sensitivities.replace(None);
+    let noise_std = channel_std(raw, &problem.mask, rows, unknowns);
+    let non_finite = || SolveError::Numerical("non-finite sensitivities at θ̂".into());
+    problem
+        .sensitivities_at(&u, JACOBIAN_REUSE)
+        .ok_or_else(non_finite)?;
     let e = problem.weighted_rows(raw);
     let longest = recordings.iter().map(Recording::len).max().unwrap_or(0);
     let lags = settings
@@ -60,24 +55,29 @@ pub(super) fn uncertainty<M: DynamicModel + ?Sized>(
         .zip(u.iter())
         .map(|(t, &x)| t.bound_state(x))
         .collect();
-    let keep: Vec<usize> = (0..jac.ncols())
+    let keep: Vec<usize> = (0..problem.columns())
         .filter(|&j| j >= p || bound_state[j] == BoundState::Free)
         .collect();
-    let jac_free = if keep.len() == jac.ncols() {
-        Cow::Borrowed(&jac)
-    } else {
-        Cow::Owned(jac.select_columns(keep.iter()))
+    let full = {
+        let cache = problem.last_sensitivities.borrow();
+        let (_, sens) = cache.as_ref().ok_or_else(non_finite)?;
+        let jac = JacobianRows {
+            sens,
+            weight: &problem.weight,
+            index: &problem.index,
+            offsets: &problem.offsets,
+            p,
+            s,
+            keep: &keep,
+        };
+        let name_refs: Vec<&str> = keep.iter().map(|&j| names[j].as_str()).collect();
+        let row = |q: usize, out: &mut [f64]| {
+            jac.row(q, &mut out[..keep.len()]);
+            out[keep.len()] = e[q];
+        };
+        let d = ols::decompose_rows(rows, &name_refs, jac.column_norms(), 1e-12, &row)?;
+        sandwich(&d, &jac, &e, &problem.spans(), lags, rows)
     };
-    let name_refs: Vec<&str> = keep.iter().map(|&j| names[j].as_str()).collect();
-    let lp = LinearProblem {
-        x: jac_free.as_ref(),
-        y: &e,
-        names: &name_refs,
-        bounds: None,
-        correlation_lags: 0,
-    };
-    let d = ols::decompose(&lp, 1e-12)?;
-    let full = sandwich(&d, jac_free.as_ref(), &e, &problem.spans(), s, lags, active);
     let mut covariance = DMatrix::zeros(p, p);
     for (a, &i) in keep.iter().enumerate().filter(|(_, i)| **i < p) {
         for (b, &j) in keep.iter().enumerate().filter(|(_, j)| **j < p) {
@@ -87,12 +87,19 @@ pub(super) fn uncertainty<M: DynamicModel + ?Sized>(
     let initial = (0..recordings.len())
         .map(|r| problem.initial_of(&u, r))
         .collect();
-    drop(jac_free);
-    // The residuals' Jacobian −w_c ∂ŷ/∂(θ, x0) back to plain sensitivities.
-    let mut jacobian = jac;
-    for (i, mut row) in jacobian.row_iter_mut().enumerate() {
-        row *= -1.0 / problem.weight[i % s];
-    }
+    // The residuals' Jacobian −w_c ∂ŷ/∂(θ, x0) back to plain sensitivities, when asked for.
+    let jacobian = match settings.keep_jacobian {
+        true => {
+            let mut jac = problem
+                .jacobian_theta(&u, JACOBIAN_REUSE)
+                .ok_or_else(non_finite)?;
+            for (i, mut row) in jac.row_iter_mut().enumerate() {
+                row *= -1.0 / problem.weight[i % s];
+            }
+            Some(jac)
+        }
+        false => None,
+    };
     Ok(OutputErrorFit {
         std_err: covariance
             .diagonal()
@@ -104,7 +111,7 @@ pub(super) fn uncertainty<M: DynamicModel + ?Sized>(
         initial,
         noise_std,
         cost: e.norm_squared(),
-        residuals: active,
+        residuals: rows,
         evaluations: 0,
         status,
         bound_state,
@@ -114,6 +121,80 @@ pub(super) fn uncertainty<M: DynamicModel + ?Sized>(
     })
 }
 
+/// The weighted Jacobian of the residuals in (θ, x0) — row `offsets[r] + i·s + c` is
+/// −w_c ∂ŷ_c(t_k)/∂(θ, x0), k = `index[r][i]` — in the columns `keep`, read from the
+/// sensitivities where they lie.
+struct JacobianRows<'a> {
+    sens: &'a [Sensitivities],
+    weight: &'a [f64],
+    index: &'a [Vec<usize>],
+    offsets: &'a [usize],
+    p: usize,
+    s: usize,
+    keep: &'a [usize],
+}
+
+impl JacobianRows<'_> {
+    /// The recording that row `q` belongs to.
+    fn recording(&self, q: usize) -> usize {
+        self.offsets.partition_point(|&o| o <= q).saturating_sub(1)
+    }
+    /// Row `q` of recording `r` in the kept columns, into `out`.
+    fn row_of(&self, r: usize, q: usize, out: &mut [f64]) {
+        let (p, s) = (self.p, self.s);
+        let local = q - self.offsets[r];
+        let (i, c) = (local / s, local % s);
+        let k = self.index[r][i];
+        let w = self.weight[c];
+        let (st, si) = (&self.sens[r].theta[c], &self.sens[r].initial[c]);
+        for (o, &j) in out.iter_mut().zip(self.keep) {
+            *o = if j < p {
+                -w * st[(k, j)]
+            } else if (j - p) / s == r {
+                -w * si[(k, (j - p) % s)]
+            } else {
+                0.0
+            };
+        }
+    }
+    /// Row `q` in the kept columns, into `out`.
+    fn row(&self, q: usize, out: &mut [f64]) {
+        self.row_of(self.recording(q), q, out);
+    }
+    /// The kept columns' norms (1 for a zero column, which then shows as rank loss), as
+    /// [`ols`] scales them: w_c² Σ_k (∂ŷ_c(t_k)/∂·)² summed over the rows in the cost, from
+    /// each sensitivity column where it lies.
+    fn column_norms(&self) -> DVector<f64> {
+        let (p, s) = (self.p, self.s);
+        let norm2 = |j: usize| -> f64 {
+            let mut sum = 0.0;
+            for (r, sens) in self.sens.iter().enumerate() {
+                if j >= p && (j - p) / s != r {
+                    continue;
+                }
+                for c in 0..s {
+                    let m = if j < p {
+                        &sens.theta[c]
+                    } else {
+                        &sens.initial[c]
+                    };
+                    let col = m.column(if j < p { j } else { (j - p) % s });
+                    let w2 = self.weight[c] * self.weight[c];
+                    sum += w2 * self.index[r].iter().map(|&k| col[k] * col[k]).sum::<f64>();
+                }
+            }
+            sum
+        };
+        DVector::from_iterator(
+            self.keep.len(),
+            self.keep.iter().map(|&j| {
+                let n = norm2(j).sqrt();
+                if n > 0.0 && n.is_finite() { n } else { 1.0 }
+            }),
+        )
+    }
+}
+
 /// The sandwich covariance of the module doc: bread from the SVD of the weighted Jacobian
 /// (J = U Σ Vᵀ D with D its column scaling), meat from the per-instant scores
 /// G_k = Σ_c J[(k, c), :]ᵀ e_(k, c) of each recording with Bartlett weights over `lags`
@@ -121,14 +202,13 @@ pub(super) fn uncertainty<M: DynamicModel + ?Sized>(
 /// by N/(N − P), N the residuals in the cost (`rows`).
 fn sandwich(
     d: &ols::Decomposition,
-    jac: &DMatrix<f64>,
+    jac: &JacobianRows<'_>,
     e: &DVector<f64>,
     spans: &[(usize, usize)],
-    nch: usize,
     lags: usize,
     rows: usize,
 ) -> DMatrix<f64> {
-    let k = jac.ncols();
+    let (k, nch) = (jac.keep.len(), jac.s);
     // H⁻¹ = D⁻¹ V Σ⁻² Vᵀ D⁻¹.
     let mut a = d.v_t.transpose();
     for (j, mut c) in a.column_iter_mut().enumerate() {
@@ -142,12 +222,19 @@ fn sandwich(
     }
     let mut meat = DMatrix::zeros(k, k);
     for &(off, n) in spans {
-        let g = DMatrix::from_fn(n, k, |t, j| {
-            (0..nch)
-                .map(|c| jac[(off + t * nch + c, j)] * e[off + t * nch + c])
-                .sum::<f64>()
-        });
-        meat += ols::bartlett_meat(&g, lags);
+        let r = jac.recording(off);
+        let mut buf = vec![0.0; k];
+        let g = |t: usize, out: &mut [f64]| {
+            out.fill(0.0);
+            for c in 0..nch {
+                let q = off + t * nch + c;
+                jac.row_of(r, q, &mut buf);
+                for (o, b) in out.iter_mut().zip(&buf) {
+                    *o += b * e[q];
+                }
+            }
+        };
+        meat += ols::bartlett_meat_rows(n, k, lags, g);
     }
     let dof = rows as f64 / (rows - k).max(1) as f64;
     &h_inv * meat * &h_inv * dof
