@@ -385,7 +385,11 @@ fn split_points(path: &Path, start: u64, len: u64, parts: usize) -> Option<Vec<u
 }
 
 /// Parses the rows in bytes `[a, b)` of `path` into the `wanted` columns (finite numbers,
-/// `width` cells a row, time strictly increasing); `None` on anything else.
+/// `width` cells a row, time strictly increasing); `None` on anything else. The lines are
+/// found with `memchr` and split at commas, each wanted cell parsed where it lies: what the
+/// csv crate does for a file with no quote and no lone carriage return, which is all this
+/// path accepts (a comment line is one that starts with `#`, a blank line is skipped, a CRLF
+/// line end is one line end); anything else goes back to the sequential reader.
 fn parse_part(
     path: &Path,
     a: u64,
@@ -396,44 +400,82 @@ fn parse_part(
     use std::io::{Seek, SeekFrom};
     let mut file = std::fs::File::open(path).ok()?;
     file.seek(SeekFrom::Start(a)).ok()?;
-    let mut input = std::io::BufReader::with_capacity(1 << 20, file.take(b - a));
-    // The csv parser drops a byte-order mark at the start of its input; here that is the
-    // middle of the file, where the sequential reader keeps it (and reads a different line).
-    let first = input.fill_buf().ok()?;
-    if first.starts_with(b"\xEF\xBB\xBF") || (first.len() < 3 && (b - a) as usize > first.len()) {
-        return None;
-    }
-    // Quotes are not special here, and a part with any quote goes back to the sequential
-    // reader: a quoted field may span a split (or hide a line end in an ignored column).
-    let mut rdr = csv::ReaderBuilder::new()
-        .has_headers(false)
-        .flexible(true)
-        .quoting(false)
-        .comment(Some(b'#'))
-        .buffer_capacity(1 << 16)
-        .from_reader(input);
+    let mut input = file.take(b - a);
     // Rows of this part, guessed from its size and ~12 bytes a cell, to grow the columns once.
     let guess = ((b - a) / (12 * width.max(1) as u64)) as usize;
     let mut cols: Vec<Vec<f64>> = wanted.iter().map(|_| Vec::with_capacity(guess)).collect();
-    let mut record = csv::ByteRecord::new();
-    while rdr.read_byte_record(&mut record).ok()? {
-        if record.len() != width || record.as_slice().contains(&b'"') {
-            return None;
+    // Which output column each cell goes to.
+    let mut slot = vec![usize::MAX; width];
+    for (o, &i) in wanted.iter().enumerate() {
+        *slot.get_mut(i)? = o;
+    }
+    let mut buf = vec![0u8; 1 << 20];
+    let (mut filled, mut first) = (0, true);
+    loop {
+        let n = input.read(&mut buf[filled..]).ok()?;
+        filled += n;
+        // The csv parser drops a byte-order mark at the start of its input; here that is the
+        // middle of the file, where the sequential reader keeps it (and reads another line).
+        if first && (filled >= 3 || n == 0) {
+            if buf[..filled].starts_with(b"\xEF\xBB\xBF") {
+                return None;
+            }
+            first = false;
         }
-        for (col, &i) in cols.iter_mut().zip(wanted) {
-            let x = number(record.get(i)?)?;
+        let end = match (n, memchr::memrchr(b'\n', &buf[..filled])) {
+            (0, _) => filled,
+            (_, Some(i)) => i + 1,
+            (_, None) => {
+                if filled == buf.len() {
+                    buf.resize(2 * buf.len(), 0);
+                }
+                continue;
+            }
+        };
+        let mut start = 0;
+        for stop in memchr::memchr_iter(b'\n', &buf[..end])
+            .chain((end > 0 && buf[end - 1] != b'\n').then_some(end))
+        {
+            parse_line(&buf[start..stop], &slot, width, &mut cols)?;
+            start = stop + 1;
+        }
+        buf.copy_within(end..filled, 0);
+        filled -= end;
+        if n == 0 {
+            return Some(cols);
+        }
+    }
+}
+
+/// One line (without its `\n`) of [`parse_part`] into `cols`; `None` where the csv crate might
+/// read it otherwise, or a cell is not a finite number, or time does not increase.
+fn parse_line(line: &[u8], slot: &[usize], width: usize, cols: &mut [Vec<f64>]) -> Option<()> {
+    let line = line.strip_suffix(b"\r").unwrap_or(line);
+    if line.is_empty() || (line[0] == b'#' && memchr::memchr(b'\r', line).is_none()) {
+        return Some(());
+    }
+    if memchr::memchr2(b'"', b'\r', line).is_some() {
+        return None;
+    }
+    let (mut cell, mut start) = (0, 0);
+    for stop in memchr::memchr_iter(b',', line).chain(std::iter::once(line.len())) {
+        let o = *slot.get(cell)?;
+        if o != usize::MAX {
+            let x = number(&line[start..stop])?;
             if !x.is_finite() {
                 return None;
             }
-            col.push(x);
+            cols[o].push(x);
         }
-        if let [.., p, q] = cols[0].as_slice()
-            && q <= p
-        {
-            return None;
-        }
+        (cell, start) = (cell + 1, stop + 1);
     }
-    Some(cols)
+    if cell != width {
+        return None;
+    }
+    match cols[0].as_slice() {
+        [.., p, q] if q <= p => None,
+        _ => Some(()),
+    }
 }
 
 /// The parts' columns end to end, the first part's grown in place; `None` if a part failed,
