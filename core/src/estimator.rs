@@ -54,6 +54,10 @@ pub struct FreeRun {
     pub offset: Option<f64>,
     /// The recordings as it fitted them (restamped, their output sampling set).
     pub recordings: Vec<Recording>,
+    /// Its free run on those recordings from those states (per recording, the outputs per
+    /// channel, every sample), when it has it at hand: the validation uses it instead of
+    /// simulating the same thing again.
+    pub outputs: Option<Vec<crate::Simulation>>,
 }
 
 /// An estimator's answer.

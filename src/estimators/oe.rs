@@ -39,6 +39,7 @@ impl Estimator for Oe {
                 initial: fit.initial,
                 offset: timed.offset,
                 recordings: timed.recordings,
+                outputs: Some(fit.simulated),
             }),
             noise_std: Some(fit.noise_std),
             timing: Some(timed.timing),

@@ -12,7 +12,8 @@
 //! `pred = −(2 gᵀδ + δᵀ JᵀJ δ)`, g = Jᵀe; with the actual reduction `act`, the ratio
 //! ρ = act/pred accepts the step when ρ > 10⁻⁴ and sets the damping as Nielsen (1999)
 //! does: μ ← μ · max(⅓, 1 − (2ρ − 1)³) after an accepted step, μ ← μ·ν, ν ← 2ν after a
-//! rejected one. It starts undamped (μ = 0, Gauss–Newton, as MINPACK's first trust region of
+//! rejected one; an undamped step that promises less than `ftol` of the cost is not taken (the
+//! point is stationary to the tolerance: the Gauss–Newton decrement). It starts undamped (μ = 0, Gauss–Newton, as MINPACK's first trust region of
 //! 100 ‖Du‖ in effect does: a warm start is then done in two or three steps) and takes
 //! μ = 10⁻⁴ at the first rejected step. The stopping tests are MINPACK's (`lmder`, Moré, Garbow & Hillstrom 1980):
 //! both relative reductions at most `ftol` (with ρ ≤ 2), or a scaled step at most `xtol`
@@ -152,6 +153,12 @@ pub(super) fn minimise<N: NormalProblem>(
             return Ok(end(u, point, evaluations, Termination::LostPatience));
         }
         let pred = -(2.0 * g.dot(&delta) + delta.dot(&(&a * &delta)));
+        // The Gauss–Newton decrement: when even the undamped step promises less than `ftol`
+        // of the cost, the point is stationary to the tolerance, and no evaluation is spent
+        // to confirm it (the Newton-decrement rule, Boyd & Vandenberghe 2004, §9.5.1).
+        if mu == 0.0 && pred <= settings.ftol * f {
+            return Ok(end(u, point, evaluations, Termination::Converged));
+        }
         let scaled_step = d.component_mul(&delta).norm();
         let scaled_point = d.component_mul(&u).norm();
         let trial = &u + &delta;

@@ -66,7 +66,7 @@ use nalgebra::{DMatrix, DVector};
 use wheelid_core::{BoundState, DynamicModel, Recording, SolveError, SolveStatus};
 
 use lm::Termination;
-use problem::{Problem, Raw, measured};
+use problem::{Evaluated, Problem, measured};
 use transform::Transform;
 
 /// Settings of an output-error fit (the result is an [`OutputErrorFit`]).
@@ -151,6 +151,10 @@ pub struct OutputErrorFit {
     /// other directions (a score test) projects it out without simulating again. `None` when
     /// [`OutputError::keep_jacobian`] is off.
     pub jacobian: Option<DMatrix<f64>>,
+    /// The free run at θ̂ from the fitted initial states, per recording ŷ per channel, every
+    /// sample: the simulation the cost was last evaluated on (a validation need not run it
+    /// again).
+    pub simulated: Vec<wheelid_core::Simulation>,
     /// Wall time of the fit \[s\].
     pub seconds: f64,
 }
@@ -166,9 +170,9 @@ pub const WARM_START_SAMPLES: usize = 50_000;
 /// [`WARM_START_SAMPLES`] samples.
 pub const WARM_START_FACTOR: usize = 4;
 
-/// A minimisation's end: the problem, θ̂ in u, its raw residuals (per recording and
-/// channel), the residual evaluations, and how the last pass ended.
-type Minimised<'a, M> = (Problem<'a, M>, DVector<f64>, Raw, usize, Termination);
+/// A minimisation's end: the problem, θ̂ in u, its simulations and raw residuals, the
+/// residual evaluations, and how the last pass ended.
+type Minimised<'a, M> = (Problem<'a, M>, DVector<f64>, Evaluated, usize, Termination);
 
 /// Relative change of a weight ratio σ_1/σ_c that calls for another pass.
 const WEIGHT_TOLERANCE: f64 = 0.1;
@@ -198,8 +202,8 @@ impl OutputError {
             None => (theta0.to_vec(), 0),
         };
         let problem = self.problem(model, recordings, &start)?;
-        let (problem, u, raw, evaluations, termination) = self.minimise(problem)?;
-        let mut fit = uncertainty::uncertainty(self, problem, u, &raw, termination)?;
+        let (problem, u, point, evaluations, termination) = self.minimise(problem)?;
+        let mut fit = uncertainty::uncertainty(self, problem, u, point, termination)?;
         fit.evaluations = warm_evaluations + evaluations;
         fit.seconds = clock.elapsed().as_secs_f64();
         Ok(fit)
@@ -389,7 +393,6 @@ impl OutputError {
             forward: self.forward_differences,
             rows,
             last_sensitivities: RefCell::new(None),
-            last_simulation: RefCell::new(None),
         })
     }
 
@@ -407,7 +410,7 @@ impl OutputError {
             max_evaluations: self.patience * (unknowns + 1),
         };
         let mut u = problem.u0.clone();
-        let mut raw = problem.raw_residuals(&u).ok_or_else(|| {
+        let mut point = problem.evaluated(&u).ok_or_else(|| {
             SolveError::InvalidProblem(format!(
                 "the model does not simulate (finitely) at θ = {:?}",
                 problem.theta_of(&u)
@@ -415,10 +418,11 @@ impl OutputError {
         })?;
         let (mut evaluations, mut termination) = (1, Termination::Converged);
         for pass in 0..MAX_PASSES {
-            let weight: Vec<f64> = uncertainty::channel_std(&raw, &problem.mask, active, unknowns)
-                .iter()
-                .map(|&sd| 1.0 / sd.max(1e-12))
-                .collect();
+            let weight: Vec<f64> =
+                uncertainty::channel_std(&point.raw, &problem.mask, active, unknowns)
+                    .iter()
+                    .map(|&sd| 1.0 / sd.max(1e-12))
+                    .collect();
             // Only the ratios move the minimiser (module doc).
             let settled = weight.iter().zip(&problem.weight).all(|(a, b)| {
                 ((a / weight[0]) / (b / problem.weight[0]) - 1.0).abs() < WEIGHT_TOLERANCE
@@ -427,7 +431,7 @@ impl OutputError {
             if pass > 0 && settled {
                 break;
             }
-            let out = lm::minimise(&problem, u, Some(raw), settings).map_err(|f| match f {
+            let out = lm::minimise(&problem, u, Some(point), settings).map_err(|f| match f {
                 lm::Failure::Start => {
                     SolveError::Numerical("the fit's start does not simulate".into())
                 }
@@ -435,10 +439,10 @@ impl OutputError {
                     "Levenberg–Marquardt stopped: the sensitivities are not finite".into(),
                 ),
             })?;
-            (u, raw) = (out.u, out.point);
+            (u, point) = (out.u, out.point);
             evaluations += out.evaluations;
             termination = out.termination;
         }
-        Ok((problem, u, raw, evaluations, termination))
+        Ok((problem, u, point, evaluations, termination))
     }
 }

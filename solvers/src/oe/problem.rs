@@ -13,6 +13,13 @@ use super::transform::Transform;
 /// Raw residuals y − ŷ per recording and channel, every sample.
 pub(super) type Raw = Vec<Vec<Vec<f64>>>;
 
+/// One evaluation of the problem: the simulations (per recording, ŷ per channel) and the raw
+/// residuals y − ŷ.
+pub(super) struct Evaluated {
+    pub raw: Raw,
+    pub sims: Vec<Simulation>,
+}
+
 /// One central-difference column: parameter index, step, outputs at +step and −step.
 type FdColumn = (usize, f64, Vec<Vec<f64>>, Vec<Vec<f64>>);
 
@@ -44,9 +51,6 @@ pub(super) struct Problem<'a, M: ?Sized> {
     /// The last sensitivities (per recording) and the u they were taken at: a new pass at the
     /// same u and the covariance at θ̂ use them.
     pub last_sensitivities: RefCell<Option<(DVector<f64>, Vec<Sensitivities>)>>,
-    /// The simulations of the last residual evaluation and the u they were run at: the base of
-    /// the next forward-difference Jacobian, which the minimiser asks for at that u.
-    pub last_simulation: RefCell<Option<(DVector<f64>, Vec<Simulation>)>>,
 }
 
 /// The measured output columns of a recording, in channel order (v, ω).
@@ -81,9 +85,9 @@ impl<M: DynamicModel + ?Sized> Problem<'_, M> {
             }
         }
     }
-    /// Unweighted residuals y − ŷ per recording and channel, or `None` if a simulation failed
-    /// or diverged.
-    pub fn raw_residuals(&self, u: &DVector<f64>) -> Option<Raw> {
+    /// The simulations at u and the unweighted residuals y − ŷ per recording and channel, or
+    /// `None` if a simulation failed or diverged.
+    pub fn evaluated(&self, u: &DVector<f64>) -> Option<Evaluated> {
         let theta = self.theta_of(u);
         let mut out = Vec::with_capacity(self.recs.len());
         let mut sims = Vec::with_capacity(self.recs.len());
@@ -103,10 +107,7 @@ impl<M: DynamicModel + ?Sized> Problem<'_, M> {
             out.push(per);
             sims.push(sim);
         }
-        if self.forward {
-            self.last_simulation.replace(Some((u.clone(), sims)));
-        }
-        Some(out)
+        Some(Evaluated { raw: out, sims })
     }
     /// The weighted residual rows of `raw`: the cost's rows in order.
     pub fn weighted_rows(&self, raw: &Raw) -> DVector<f64> {
@@ -141,9 +142,15 @@ impl<M: DynamicModel + ?Sized> Problem<'_, M> {
         spans
     }
     /// ∂ŷ/∂θ and ∂ŷ/∂x0 of every recording at u, into the cache: the cached ones when they
-    /// were taken within `reuse` ‖u‖ of u (0: at u exactly), else new ones; `None` if a
-    /// simulation fails or a value is not finite.
-    pub fn sensitivities_at(&self, u: &DVector<f64>, reuse: f64) -> Option<()> {
+    /// were taken within `reuse` ‖u‖ of u (0: at u exactly), else new ones (forward
+    /// differences start from `sims`, the simulations at u); `None` if a simulation fails or a
+    /// value is not finite.
+    pub fn sensitivities_at(
+        &self,
+        u: &DVector<f64>,
+        reuse: f64,
+        sims: &[Simulation],
+    ) -> Option<()> {
         let near = |at: &DVector<f64>| at == u || (at - u).norm() <= reuse * u.norm();
         if matches!(&*self.last_sensitivities.borrow(), Some((at, _)) if near(at)) {
             return Some(());
@@ -151,13 +158,9 @@ impl<M: DynamicModel + ?Sized> Problem<'_, M> {
         // Not held through the peak of the new ones.
         self.last_sensitivities.replace(None);
         let theta = self.theta_of(u);
-        let mut cached = match self.last_simulation.take() {
-            Some((at, sims)) if at == *u => sims.into_iter().map(Some).collect(),
-            _ => vec![None; self.recs.len()],
-        };
         let mut all = Vec::with_capacity(self.recs.len());
         for (r, rec) in self.recs.iter().enumerate() {
-            let sens = self.sensitivities(&theta, &self.initial_of(u, r), rec, cached[r].take())?;
+            let sens = self.sensitivities(&theta, &self.initial_of(u, r), rec, sims.get(r))?;
             let finite = |m: &DMatrix<f64>| m.iter().all(|x| x.is_finite());
             if !(sens.theta.iter().all(finite) && sens.initial.iter().all(finite)) {
                 return None;
@@ -174,7 +177,7 @@ impl<M: DynamicModel + ?Sized> Problem<'_, M> {
         theta: &[f64],
         x0: &[f64],
         rec: &Recording,
-        cached: Option<Simulation>,
+        cached: Option<&Simulation>,
     ) -> Option<Sensitivities> {
         if let Ok(Some((_, sens))) = self.model.simulate_with_sensitivities(theta, rec, x0) {
             return Some(sens);
@@ -189,13 +192,17 @@ impl<M: DynamicModel + ?Sized> Problem<'_, M> {
         theta: &[f64],
         x0: &[f64],
         rec: &Recording,
-        cached: Option<Simulation>,
+        cached: Option<&Simulation>,
     ) -> Option<Sensitivities> {
         let (p, s, n) = (self.p(), self.nch(), rec.len());
         let scale = theta.iter().fold(0.0f64, |a, x| a.max(x.abs())).max(1e-12);
+        let owned;
         let base_sim = match (self.forward, cached) {
             (true, Some(sim)) => Some(sim),
-            (true, None) => Some(self.model.simulate(theta, rec, x0).ok()?),
+            (true, None) => {
+                owned = self.model.simulate(theta, rec, x0).ok()?;
+                Some(&owned)
+            }
             (false, _) => None,
         };
         let column = |j: usize| -> Option<FdColumn> {
@@ -217,7 +224,7 @@ impl<M: DynamicModel + ?Sized> Problem<'_, M> {
                 Some(b) => {
                     let dn = up
                         .iter()
-                        .zip(b)
+                        .zip(b.iter())
                         .map(|(u, b)| u.iter().zip(b).map(|(u, b)| 2.0 * b - u).collect())
                         .collect();
                     Some((j, h, up, dn))
@@ -269,9 +276,15 @@ impl<M: DynamicModel + ?Sized> Problem<'_, M> {
                 .map_or(self.nch() * self.recs.len(), |_| 0)
     }
     /// The weighted Jacobian of the residuals with respect to (θ, x0) — not u — time-major
-    /// rows, from the sensitivities at u (the cached ones if taken within `reuse` ‖u‖).
-    pub fn jacobian_theta(&self, u: &DVector<f64>, reuse: f64) -> Option<DMatrix<f64>> {
-        self.sensitivities_at(u, reuse)?;
+    /// rows, from the sensitivities at u (the cached ones if taken within `reuse` ‖u‖; `sims`
+    /// are the simulations at u).
+    pub fn jacobian_theta(
+        &self,
+        u: &DVector<f64>,
+        reuse: f64,
+        sims: &[Simulation],
+    ) -> Option<DMatrix<f64>> {
+        self.sensitivities_at(u, reuse, sims)?;
         let (p, s) = (self.p(), self.nch());
         let mut jac = DMatrix::zeros(self.rows, self.columns());
         let cache = self.last_sensitivities.borrow();
@@ -377,15 +390,15 @@ fn gram(cols: &[&[f64]], e: &[f64], index: &[usize]) -> (Vec<f64>, Vec<f64>) {
 }
 
 impl<M: DynamicModel + ?Sized> NormalProblem for Problem<'_, M> {
-    type Point = Raw;
+    type Point = Evaluated;
 
-    fn evaluate(&self, u: &DVector<f64>) -> Option<Raw> {
-        self.raw_residuals(u)
+    fn evaluate(&self, u: &DVector<f64>) -> Option<Evaluated> {
+        self.evaluated(u)
     }
 
-    fn cost(&self, raw: &Raw) -> f64 {
+    fn cost(&self, point: &Evaluated) -> f64 {
         let mut f = 0.0;
-        for (r, per) in raw.iter().enumerate() {
+        for (r, per) in point.raw.iter().enumerate() {
             for (c, ec) in per.iter().enumerate() {
                 let w2 = self.weight[c] * self.weight[c];
                 f += w2 * self.index[r].iter().map(|&k| ec[k] * ec[k]).sum::<f64>();
@@ -397,9 +410,9 @@ impl<M: DynamicModel + ?Sized> NormalProblem for Problem<'_, M> {
     fn normal_equations(
         &self,
         u: &DVector<f64>,
-        raw: &Raw,
+        point: &Evaluated,
     ) -> Option<(DMatrix<f64>, DVector<f64>)> {
-        self.sensitivities_at(u, 0.0)?;
-        Some(self.normal_equations_at(u, raw))
+        self.sensitivities_at(u, 0.0, &point.sims)?;
+        Some(self.normal_equations_at(u, &point.raw))
     }
 }

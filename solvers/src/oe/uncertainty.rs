@@ -6,7 +6,7 @@ use nalgebra::{DMatrix, DVector};
 use wheelid_core::{BoundState, DynamicModel, Recording, Sensitivities, SolveError, SolveStatus};
 
 use super::lm::Termination;
-use super::problem::{Problem, Raw};
+use super::problem::{Evaluated, Problem, Raw};
 use super::{OutputError, OutputErrorFit};
 use crate::ols;
 
@@ -24,9 +24,11 @@ pub(super) fn uncertainty<M: DynamicModel + ?Sized>(
     settings: &OutputError,
     problem: Problem<'_, M>,
     u: DVector<f64>,
-    raw: &Raw,
+    point: Evaluated,
     termination: Termination,
 ) -> Result<OutputErrorFit, SolveError> {
+    let Evaluated { raw, sims } = point;
+    let raw = &raw;
     let (model, recordings) = (problem.model, problem.recs);
     let (p, s) = (problem.p(), problem.nch());
     let (rows, unknowns) = (problem.rows, problem.unknowns());
@@ -39,7 +41,7 @@ pub(super) fn uncertainty<M: DynamicModel + ?Sized>(
     let noise_std = channel_std(raw, &problem.mask, rows, unknowns);
     let non_finite = || SolveError::Numerical("non-finite sensitivities at θ̂".into());
     problem
-        .sensitivities_at(&u, JACOBIAN_REUSE)
+        .sensitivities_at(&u, JACOBIAN_REUSE, &sims)
         .ok_or_else(non_finite)?;
     let e = problem.weighted_rows(raw);
     let longest = recordings.iter().map(Recording::len).max().unwrap_or(0);
@@ -91,7 +93,7 @@ pub(super) fn uncertainty<M: DynamicModel + ?Sized>(
     let jacobian = match settings.keep_jacobian {
         true => {
             let mut jac = problem
-                .jacobian_theta(&u, JACOBIAN_REUSE)
+                .jacobian_theta(&u, JACOBIAN_REUSE, &sims)
                 .ok_or_else(non_finite)?;
             for (i, mut row) in jac.row_iter_mut().enumerate() {
                 row *= -1.0 / problem.weight[i % s];
@@ -117,6 +119,7 @@ pub(super) fn uncertainty<M: DynamicModel + ?Sized>(
         bound_state,
         correlation_lags: lags,
         jacobian,
+        simulated: sims,
         seconds: 0.0,
     })
 }
