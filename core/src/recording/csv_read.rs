@@ -258,7 +258,11 @@ fn recording_of(
 
 /// A cell as a number: as it is, else with the blanks around it trimmed (`" 0.5 "`).
 fn number(raw: &[u8]) -> Option<f64> {
-    let text = std::str::from_utf8(raw).ok()?;
+    number_str(std::str::from_utf8(raw).ok()?)
+}
+
+/// [`number`] of a cell already known to be text.
+fn number_str(text: &str) -> Option<f64> {
     text.parse().ok().or_else(|| text.trim().parse().ok())
 }
 
@@ -457,11 +461,14 @@ fn parse_line(line: &[u8], slot: &[usize], width: usize, cols: &mut [Vec<f64>]) 
     if memchr::memchr2(b'"', b'\r', line).is_some() {
         return None;
     }
+    // One UTF-8 check for the line (a line that fails it goes back to the sequential reader,
+    // which checks cell by cell); commas are ASCII, so every cell is a `str` slice of it.
+    let text = std::str::from_utf8(line).ok()?;
     let (mut cell, mut start) = (0, 0);
     for stop in memchr::memchr_iter(b',', line).chain(std::iter::once(line.len())) {
         let o = *slot.get(cell)?;
         if o != usize::MAX {
-            let x = number(&line[start..stop])?;
+            let x = number_str(text.get(start..stop)?)?;
             if !x.is_finite() {
                 return None;
             }
