@@ -12,6 +12,7 @@ cd "$(dirname "$0")"
 target="${1:?target: csv | mcap | model | run}"
 seconds="${2:-3600}"
 cargo afl build --release --quiet
+mkdir -p out
 export AFL_SKIP_CPUFREQ=1 AFL_I_DONT_CARE_ABOUT_MISSING_CRASHES=1 AFL_NO_UI=1
 # A fresh run, or a resumed one (`-i -`) when its output directory exists.
 input="corpus/$target"

@@ -297,6 +297,38 @@ fn output_error_fits_a_dead_time_by_finite_differences() {
 }
 
 #[test]
+fn output_error_hands_back_the_free_run_it_ended_on_bit_for_bit() {
+    // `identify` validates with the fit's own final simulation instead of running it again:
+    // that is sound only if it is exactly the model's free run at θ̂ from the fitted initial
+    // state, over every sample (held-out ones included), which this checks.
+    use wheelid::core::DynamicModel;
+    let robot = RobotProfile::khepera3();
+    let rec = recording(&robot, 4, 60.0);
+    let mask: Vec<bool> = (0..rec.len()).map(|k| (k / 200) % 3 != 1).collect();
+    let oe = OutputError {
+        mask: Some(vec![mask]),
+        keep_jacobian: false,
+        ..OutputError::default()
+    };
+    let fit = oe
+        .fit(&VwPd, std::slice::from_ref(&rec), &robot.theta)
+        .expect("fits");
+    assert!(fit.jacobian.is_none());
+    let again = VwPd
+        .simulate(&fit.theta, &rec, &fit.initial[0])
+        .expect("simulates");
+    assert_eq!(fit.simulated.len(), 1);
+    assert_eq!(fit.simulated[0].len(), 2);
+    for (c, (handed, own)) in fit.simulated[0].iter().zip(&again).enumerate() {
+        assert_eq!(handed.len(), rec.len());
+        assert!(
+            handed == own,
+            "channel {c}: the handed-back run is not the model's free run at θ̂"
+        );
+    }
+}
+
+#[test]
 fn output_error_hands_back_its_jacobian_at_the_optimum() {
     // The fit's `jacobian` is ∂ŷ/∂(θ, x0) at θ̂ over the rows in the cost (a mask keeps every
     // other block of 100 samples), time-major: checked against central differences of the
