@@ -60,26 +60,8 @@ pub(super) fn uncertainty<M: DynamicModel + ?Sized>(
     let keep: Vec<usize> = (0..problem.columns())
         .filter(|&j| j >= p || bound_state[j] == BoundState::Free)
         .collect();
-    let full = {
-        let cache = problem.last_sensitivities.borrow();
-        let (_, sens) = cache.as_ref().ok_or_else(non_finite)?;
-        let jac = JacobianRows {
-            sens,
-            weight: &problem.weight,
-            index: &problem.index,
-            offsets: &problem.offsets,
-            p,
-            s,
-            keep: &keep,
-        };
-        let name_refs: Vec<&str> = keep.iter().map(|&j| names[j].as_str()).collect();
-        let row = |q: usize, out: &mut [f64]| {
-            jac.row(q, &mut out[..keep.len()]);
-            out[keep.len()] = e[q];
-        };
-        let d = ols::decompose_rows(rows, &name_refs, jac.column_norms(), 1e-12, &row)?;
-        sandwich(&d, &jac, &e, &problem.spans(), lags, rows)
-    };
+    let name_refs: Vec<&str> = keep.iter().map(|&j| names[j].as_str()).collect();
+    let full = kept_covariance(&problem, &keep, &name_refs, &e, lags)?;
     let mut covariance = DMatrix::zeros(p, p);
     for (a, &i) in keep.iter().enumerate().filter(|(_, i)| **i < p) {
         for (b, &j) in keep.iter().enumerate().filter(|(_, j)| **j < p) {
@@ -122,6 +104,40 @@ pub(super) fn uncertainty<M: DynamicModel + ?Sized>(
         simulated: sims,
         seconds: 0.0,
     })
+}
+
+/// The sandwich covariance (module doc) of the unknowns `keep` (named `names`) from the cached
+/// sensitivities at θ̂ and the weighted residuals `e`, over `lags` instants.
+///
+/// # Errors
+/// [`SolveError::RankDeficient`] if the data cannot separate the kept unknowns;
+/// [`SolveError::Numerical`] if no sensitivities are cached.
+fn kept_covariance<M: DynamicModel + ?Sized>(
+    problem: &Problem<'_, M>,
+    keep: &[usize],
+    names: &[&str],
+    e: &DVector<f64>,
+    lags: usize,
+) -> Result<DMatrix<f64>, SolveError> {
+    let cache = problem.last_sensitivities.borrow();
+    let (_, sens) = cache
+        .as_ref()
+        .ok_or_else(|| SolveError::Numerical("no sensitivities at θ̂".into()))?;
+    let jac = JacobianRows {
+        sens,
+        weight: &problem.weight,
+        index: &problem.index,
+        offsets: &problem.offsets,
+        p: problem.p(),
+        s: problem.nch(),
+        keep,
+    };
+    let row = |q: usize, out: &mut [f64]| {
+        jac.row(q, &mut out[..keep.len()]);
+        out[keep.len()] = e[q];
+    };
+    let d = ols::decompose_rows(problem.rows, names, jac.column_norms(), 1e-12, &row)?;
+    Ok(sandwich(&d, &jac, e, &problem.spans(), lags, problem.rows))
 }
 
 /// The weighted Jacobian of the residuals in (θ, x0) — row `offsets[r] + i·s + c` is
