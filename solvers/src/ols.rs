@@ -309,40 +309,19 @@ pub(crate) fn bartlett_meat_rows(
     m / (lags + 1) as f64
 }
 
-/// [`bartlett_meat`] of the rows g_t[j] = `g(t, j)`, t < n, j < k, never stored.
+/// [`bartlett_meat`] of the rows g_t[j] = `g(t, j)`, t < n, j < k, never stored (each value
+/// asked for once).
 pub(crate) fn bartlett_meat_with(
     n: usize,
     k: usize,
     lags: usize,
     g: impl Fn(usize, usize) -> f64,
 ) -> DMatrix<f64> {
-    let mut m = DMatrix::<f64>::zeros(k, k);
-    let mut window = vec![0.0; k];
-    // Window s covers t = s … s + L; s runs from −L, so t = s + L enters as s advances and
-    // t = s − 1 leaves.
-    for enter in 0..n + lags {
-        if enter < n {
-            for (j, b) in window.iter_mut().enumerate() {
-                *b += g(enter, j);
-            }
+    bartlett_meat_rows(n, k, lags, |t, out| {
+        for (j, o) in out.iter_mut().enumerate() {
+            *o = g(t, j);
         }
-        if let Some(leave) = enter.checked_sub(lags + 1) {
-            for (j, b) in window.iter_mut().enumerate() {
-                *b -= g(leave, j);
-            }
-        }
-        for a in 0..k {
-            for b in a..k {
-                m[(a, b)] += window[a] * window[b];
-            }
-        }
-    }
-    for a in 0..k {
-        for b in 0..a {
-            m[(a, b)] = m[(b, a)];
-        }
-    }
-    m / (lags + 1) as f64
+    })
 }
 
 impl Solver for Ols {
