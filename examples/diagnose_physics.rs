@@ -27,7 +27,7 @@
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::fmt::Write as _;
 use std::io::Write as _;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
@@ -36,7 +36,7 @@ use anyhow::{Context, Result, bail};
 use clap::Parser;
 use serde::Serialize;
 use statrs::distribution::{Beta, ContinuousCDF};
-use wheelid::core::Timing;
+use wheelid::core::{Recording, Timing};
 use wheelid::diagnose::{DiagnoseSettings, diagnose};
 use wheelid::robots::Excitation;
 use wheelid::robots::physics::{
@@ -127,6 +127,8 @@ pub struct RunSpec {
     pub jitter: f64,
     /// Diagnosis candidates by name (`None`: every registered one).
     pub candidates: Option<Vec<String>>,
+    /// Directory of simulated recordings to reuse (`None`: always simulate).
+    pub cache: Option<PathBuf>,
 }
 
 impl RunSpec {
@@ -640,12 +642,47 @@ fn clean_twin(
     if let Some(x) = cache.lock().ok().and_then(|c| c.get(&key).cloned()) {
         return Ok(x);
     }
-    let rec = simulate_physics_recording(p, exc, &settings(spec, PhysicsEffects::default()))?;
+    let clean = RunSpec {
+        effects: Vec::new(),
+        ..spec.clone()
+    };
+    let rec = recording(p, exc, &clean, PhysicsEffects::default())?;
     let x = Arc::new([rec.v, rec.w]);
     if let Ok(mut c) = cache.lock() {
         c.insert(key, x.clone());
     }
     Ok(x)
+}
+
+/// The recording of `spec` with `effects`: read from `spec.cache` when it holds it, else
+/// simulated (and written there). CSV keeps every f64 exactly (shortest round-trip digits), so a
+/// cached run diagnoses as the simulated one does.
+fn recording(
+    p: &PhysicalProfile,
+    exc: &Excitation,
+    spec: &RunSpec,
+    effects: PhysicsEffects,
+) -> Result<Recording> {
+    let path = spec.cache.as_ref().map(|dir| {
+        dir.join(format!(
+            "{}_{}_{}_{}_{}s_j{}.csv",
+            spec.profile,
+            spec.timing.name(),
+            spec.case(),
+            spec.seed,
+            spec.duration_s,
+            spec.jitter
+        ))
+    });
+    if let Some(path) = path.as_ref().filter(|p| p.exists()) {
+        return Recording::read_csv(path).with_context(|| format!("cached {}", path.display()));
+    }
+    let rec = simulate_physics_recording(p, exc, &settings(spec, effects))?;
+    if let Some(path) = &path {
+        std::fs::create_dir_all(path.parent().unwrap_or(Path::new(".")))?;
+        rec.write_csv(path)?;
+    }
+    Ok(rec)
 }
 
 /// The physics settings of `spec` with `effects`: encoders on, no wheel noise.
@@ -712,7 +749,7 @@ fn run_into(spec: &RunSpec, cache: &CleanRuns, rec: &mut Record) -> Result<()> {
     let (effects, truth_params) = draw_effects(&p, &exc, spec)?;
     rec.truth_params = truth_params;
     let clock = Instant::now();
-    let recording = simulate_physics_recording(&p, &exc, &settings(spec, effects))?;
+    let recording = recording(&p, &exc, spec, effects)?;
     rec.simulate_s = clock.elapsed().as_secs_f64();
     if !spec.effects.is_empty() {
         let twin = clean_twin(&p, &exc, spec, cache)?;
@@ -1261,6 +1298,13 @@ pub struct Args {
     /// at what one candidate does on a case, not for the reported figures.
     #[arg(long, value_delimiter = ',')]
     pub candidates: Option<Vec<String>>,
+    /// Keep every simulated recording (and clean twin) as CSV in this directory and read it
+    /// back instead of simulating when it is there: comparing two versions of the diagnosis
+    /// on the same recordings costs the diagnoses only. The file name holds profile,
+    /// convention, case, seed, duration and jitter; a harness whose physics changed needs a
+    /// fresh directory.
+    #[arg(long)]
+    pub cache: Option<PathBuf>,
 }
 
 /// The runs `a` asks for: profile × convention × case × seed.
@@ -1306,6 +1350,7 @@ pub fn plan(a: &Args) -> Result<Vec<RunSpec>> {
                         duration_s: a.duration.unwrap_or_else(|| default_duration(profile)),
                         jitter: a.jitter,
                         candidates: a.candidates.clone(),
+                        cache: a.cache.clone(),
                     });
                 }
             }

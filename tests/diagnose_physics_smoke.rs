@@ -21,6 +21,7 @@ fn a_clean_and_a_latency_run_of_the_khepera_complete_and_the_latency_is_a_mismat
         duration_s: 30.0,
         jitter: 0.0,
         candidates: None,
+        cache: None,
     };
     let specs = [spec(vec![]), spec(vec!["latency"])];
     let recs = run_all(&specs, 2, &|_, _| {});
