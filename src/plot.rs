@@ -422,7 +422,7 @@ fn diagnosis_correlation_plot(d: &Diagnosis, dir: &Path) -> Result<PathBuf> {
                         .iter()
                         .chain(&after.r)
                         .copied()
-                        .chain([before.bound, -before.bound]),
+                        .chain(before.band.iter().flat_map(|b| [*b, -*b])),
                 );
                 let x = |i: usize| (i as isize - lag) as f64 * dt;
                 let (x0, x1) = (x(0), x(before.r.len().saturating_sub(1)).max(x(0) + dt));
@@ -459,9 +459,9 @@ fn diagnosis_correlation_plot(d: &Diagnosis, dir: &Path) -> Result<PathBuf> {
                         .legend(move |(a, b)| {
                             PathElement::new(vec![(a, b), (a + 20, b)], color.stroke_width(2))
                         });
-                    for b in [t.bound, -t.bound] {
+                    for sign in [1.0, -1.0] {
                         chart.draw_series(LineSeries::new(
-                            [(x0, b), (x1, b)],
+                            t.band.iter().enumerate().map(|(i, b)| (x(i), sign * b)),
                             color.mix(0.6).stroke_width(1),
                         ))?;
                     }

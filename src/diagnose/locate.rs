@@ -219,26 +219,27 @@ pub(crate) fn locate(
         ("high v·ω", Box::new(|k| vw[k] >= vw75 && vw75 > 0.0)),
     ];
     let n = v.len();
+    let residuals = [resid(0), resid(1)];
+    let mut tests =
+        residual::independence_all(&[&residuals[0], &residuals[1]], &[&vr, &wr], max_lag)
+            .into_iter();
     let channels = (0..2)
         .map(|c| {
-            let e = resid(c);
+            let e = &residuals[c];
             let y = if c == 0 { &v } else { &w };
             let all = rms(e.iter().copied());
-            let independence: Vec<Independence> = [&vr, &wr]
-                .iter()
-                .map(|u| residual::independence(&e, u, max_lag))
-                .collect();
+            let independence: Vec<Independence> = tests.next().unwrap_or_default();
             ChannelLocation {
                 channel: ["v", "w"][c].into(),
                 rms: all,
-                whiteness: residual::whiteness(&e, max_lag),
+                whiteness: residual::whiteness(e, max_lag),
                 peak_lag_s: independence
                     .iter()
                     .map(|t| t.peak_lag as f64 * dt)
                     .collect(),
                 independence,
-                bands: bands(&e, y, dt),
-                regions: shares(&regions, &e, n, all),
+                bands: bands(e, y, dt),
+                regions: shares(&regions, e, n, all),
                 windows: windows(recs, sim, keep, c, all, dt),
             }
         })
