@@ -11,7 +11,14 @@
 #   TUNING                 seeds    1-20    look at these while tuning:  --seeds 1..20
 #   HOLD-OUT               seeds 1001-1100  report only:                 --seeds 1001..1100
 #   CLEAN FALSE ALARMS     seeds 2001-2100  report only, --cases clean:  --seeds 2001..2100
+# Used up (looked at, now tuning-like): hold-out 1001-1006 (1001-1002 in tuning, 1003-1004
+# reported at 04cf35c, 1005-1006 after the noise-floor change of 2026-11-24); clean 2001-2100
+# (its ten false alarms were studied on 2026-11-24). Fresh clean seeds 2101-2200 were reported
+# once after that change; the next report takes 1007.. and 2201.. .
 # (--seeds A..B includes both ends.)
+#
+# --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
+# of the diagnosis on the same seeds then costs only the diagnoses.
 #
 # Examples:
 #   scripts/diagnose_physics.sh --seeds 1..3 --profiles khepera3 --conventions window_end \

@@ -373,6 +373,9 @@ fn verdict(d: &Diagnosis) -> String {
     let practical = [d.nominal.channels.v, d.nominal.channels.w]
         .iter()
         .all(|c| c.fit_percent >= crate::diagnose::PRACTICAL_FIT_PERCENT);
+    let within_noise = [d.nominal.channels.v, d.nominal.channels.w]
+        .iter()
+        .all(|c| c.noise_corrected_fit_percent >= crate::diagnose::PRACTICAL_FIT_PERCENT);
     let low: Vec<String> = [("v", d.nominal.channels.v), ("ω", d.nominal.channels.w)]
         .iter()
         .filter(|(_, c)| c.fit_percent < crate::diagnose::LOW_FIT_PERCENT)
@@ -393,6 +396,16 @@ fn verdict(d: &Diagnosis) -> String {
             crate::diagnose::PRACTICAL_FIT_PERCENT,
             d.nominal.channels.v.fit_percent,
             d.nominal.channels.w.fit_percent
+        ),
+        (true, _) if !d.mismatch && within_noise => format!(
+            "no practical mismatch: evidence survives Holm's correction, but what the model \
+             misses is the measurement noise (residual {:.1} × the noise floor on v, {:.1} × on \
+             ω; beyond it the model explains v {:.2} %, ω {:.2} %, ≥ {:.0} %); the model is kept",
+            d.nominal.channels.v.noise_ratio,
+            d.nominal.channels.w.noise_ratio,
+            d.nominal.channels.v.noise_corrected_fit_percent,
+            d.nominal.channels.w.noise_corrected_fit_percent,
+            crate::diagnose::PRACTICAL_FIT_PERCENT,
         ),
         (true, _) if !d.mismatch => "no mismatch kept: evidence survives Holm's correction, but \
              no candidate improves the held-out fit and the residual is then independent of the \
