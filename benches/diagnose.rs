@@ -167,10 +167,26 @@ fn bench(c: &mut Criterion) {
     g.finish();
 }
 
+/// The residual–command independence tests of one `locate` call on the clean case's
+/// validation samples: 2 residuals × 2 commands, 12,000 samples (the 2 validation blocks of 5
+/// of the 10-minute recording), lags ±100 (±2 s at 50 Hz).
+fn independence(c: &mut Criterion) {
+    let rec = recording(Effects::default());
+    let n = 12_000;
+    let (v, w) = (&rec.v[..n], &rec.w[..n]);
+    // A stand-in residual: the measurement less a one-sample-late copy of itself.
+    let ev: Vec<f64> = (1..n).map(|k| v[k] - v[k - 1]).collect();
+    let ew: Vec<f64> = (1..n).map(|k| w[k] - w[k - 1]).collect();
+    let (vr, wr) = (&rec.v_ref[1..n], &rec.w_ref[1..n]);
+    c.bench_function("residual_independence_2x2_12000_samples_lags_100", |b| {
+        b.iter(|| wheelid::core::residual::independence_all(&[&ev, &ew], &[vr, wr], 100))
+    });
+}
+
 criterion_group! {
     name = benches;
     // No plots: criterion's PDF plots need a system font this machine kind lacks.
     config = Criterion::default().without_plots();
-    targets = bench
+    targets = independence, bench
 }
 criterion_main!(benches);

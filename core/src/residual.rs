@@ -210,18 +210,30 @@ fn test_from(r: Vec<f64>, variance: &[f64], den: f64, max_lag: usize) -> Indepen
     }
 }
 
+/// The Bartlett weight of lag j in the long-run variance over M lags, both sides counted:
+/// w_0 = 1, w_j = 2 (1 − j/(M + 1)).
+fn bartlett_weight(j: usize, max_lag: usize) -> f64 {
+    if j == 0 {
+        1.0
+    } else {
+        2.0 * (1.0 - j as f64 / (max_lag as f64 + 1.0))
+    }
+}
+
 /// Σ_{j=0}^{M} w_j S_j(τ), τ = −M…M, for every pair (residual i, input k) at index
-/// i · len(cu) + k: S_j(τ) = Σ_t z_t z_{t+j} of the lag products z_t = ce(t + τ) cu(t), with
-/// w_0 = 1 and w_j = 2 (1 − j/(M + 1)). S_j(τ) = Σ_t a_j(t + τ) b_j(t) with
-/// a_j(t) = ce(t) ce(t + j), b_j(t) = cu(t) cu(t + j): a cross-correlation, done by FFT,
-/// zero-padded so that lags ±M do not wrap.
+/// i · len(cu) + k ([`bartlett_weight`]): S_j(τ) = Σ_t z_t z_{t+j} of the lag products
+/// z_t = ce(t + τ) cu(t). S_j(τ) = Σ_t a_j(t + τ) b_j(t) with a_j(t) = ce(t) ce(t + j),
+/// b_j(t) = cu(t) cu(t + j): a cross-correlation, A_j B̄_j in the frequency domain
+/// (zero-padded so that lags ±M do not wrap). The transform is linear, so the weighted sum
+/// over j is taken of the spectra and transformed back once per pair.
 fn weighted_lag_products(ce: &[Vec<f64>], cu: &[Vec<f64>], max_lag: usize) -> Vec<Vec<f64>> {
     use rayon::prelude::*;
+    use realfft::num_complex::Complex;
     let n = ce.first().or(cu.first()).map_or(0, Vec::len);
     let lags = 2 * max_lag + 1;
-    let zero = || vec![vec![0.0; lags]; ce.len() * cu.len()];
+    let pairs = ce.len() * cu.len();
     if n == 0 {
-        return zero();
+        return vec![vec![0.0; lags]; pairs];
     }
     let size = (n + max_lag).next_power_of_two();
     let mut planner = realfft::RealFftPlanner::<f64>::new();
@@ -229,40 +241,37 @@ fn weighted_lag_products(ce: &[Vec<f64>], cu: &[Vec<f64>], max_lag: usize) -> Ve
         planner.plan_fft_forward(size),
         planner.plan_fft_inverse(size),
     );
-    let spectrum = |x: &[f64], j: usize, buf: &mut Vec<f64>| {
+    let bins = size / 2 + 1;
+    let zero = || vec![vec![Complex::new(0.0, 0.0); bins]; pairs];
+    let spectrum = |x: &[f64], j: usize, buf: &mut [f64], out: &mut [Complex<f64>]| {
         for (t, b) in buf.iter_mut().enumerate() {
             *b = if t + j < n { x[t] * x[t + j] } else { 0.0 };
         }
-        let mut out = r2c.make_output_vec();
         // The buffer lengths match the plan: the transform cannot fail.
-        let _ = r2c.process(buf, &mut out);
-        out
+        let _ = r2c.process(buf, out);
     };
     // Fixed chunks of j, each summed in order, then the chunks in order: the same bits
     // whatever the number of threads.
     let js: Vec<usize> = (0..=max_lag.min(n - 1)).collect();
-    let parts: Vec<Vec<Vec<f64>>> = js
+    let parts: Vec<Vec<Vec<Complex<f64>>>> = js
         .par_chunks(8)
         .map(|chunk| {
             let mut acc = zero();
             let mut buf = vec![0.0; size];
-            let mut corr = vec![0.0; size];
+            let mut fa = vec![vec![Complex::new(0.0, 0.0); bins]; ce.len()];
+            let mut fb = vec![vec![Complex::new(0.0, 0.0); bins]; cu.len()];
             for &j in chunk {
-                let w = if j == 0 {
-                    1.0
-                } else {
-                    2.0 * (1.0 - j as f64 / (max_lag as f64 + 1.0))
-                };
-                let fa: Vec<_> = ce.iter().map(|x| spectrum(x, j, &mut buf)).collect();
-                let fb: Vec<_> = cu.iter().map(|x| spectrum(x, j, &mut buf)).collect();
+                let w = bartlett_weight(j, max_lag);
+                for (x, out) in ce.iter().zip(fa.iter_mut()) {
+                    spectrum(x, j, &mut buf, out);
+                }
+                for (x, out) in cu.iter().zip(fb.iter_mut()) {
+                    spectrum(x, j, &mut buf, out);
+                }
                 for (i, a) in fa.iter().enumerate() {
                     for (k, b) in fb.iter().enumerate() {
-                        let mut prod: Vec<_> = a.iter().zip(b).map(|(x, y)| x * y.conj()).collect();
-                        let _ = c2r.process(&mut prod, &mut corr);
-                        let out = &mut acc[i * cu.len() + k];
-                        for (l, o) in out.iter_mut().enumerate() {
-                            let tau = l as isize - max_lag as isize;
-                            *o += w * corr[tau.rem_euclid(size as isize) as usize] / size as f64;
+                        for ((o, x), y) in acc[i * cu.len() + k].iter_mut().zip(a).zip(b) {
+                            *o += w * x * y.conj();
                         }
                     }
                 }
@@ -278,49 +287,58 @@ fn weighted_lag_products(ce: &[Vec<f64>], cu: &[Vec<f64>], max_lag: usize) -> Ve
             }
         }
     }
+    let mut corr = vec![0.0; size];
     total
+        .into_iter()
+        .map(|mut spec| {
+            // Real inputs: the DC and Nyquist bins of the sum are real (rounding aside).
+            spec[0].im = 0.0;
+            spec[bins - 1].im = 0.0;
+            if c2r.process(&mut spec, &mut corr).is_err() {
+                return vec![f64::NAN; lags];
+            }
+            (0..lags)
+                .map(|l| {
+                    let tau = l as isize - max_lag as isize;
+                    corr[tau.rem_euclid(size as isize) as usize] / size as f64
+                })
+                .collect()
+        })
+        .collect()
 }
 
 /// V(τ) of [`independence`] from the weighted sums of lag products `weighted` (of
 /// [`weighted_lag_products`]) for centred `ce`, `cu` of equal length: each lag's products
 /// centred on their mean z̄, Ĉ_j = S_j − z̄ (P_j + Q_j) + (n_τ − j) z̄², with P_j, Q_j the
-/// sums of z over its first and last n_τ − j terms.
+/// sums of z over its first and last n_τ − j terms: P_j + Q_j = 2 Σz − (head_j + tail_j),
+/// the sums of its first and last j terms.
 fn centre_variance(ce: &[f64], cu: &[f64], weighted: &[f64], max_lag: usize) -> Vec<f64> {
     let n = ce.len();
     let m = max_lag as isize;
     (-m..=m)
         .enumerate()
         .map(|(i, tau)| {
-            let z: Vec<f64> = if tau >= 0 {
-                let t = tau as usize;
-                (0..n.saturating_sub(t))
-                    .map(|k| ce[k + t] * cu[k])
-                    .collect()
-            } else {
-                let t = tau.unsigned_abs();
-                (0..n.saturating_sub(t))
-                    .map(|k| ce[k] * cu[k + t])
-                    .collect()
+            let t = tau.unsigned_abs();
+            let len = n.saturating_sub(t);
+            // z_k = ce(k + τ) cu(k) over the overlap.
+            let z = |k: usize| {
+                if tau >= 0 {
+                    ce[k + t] * cu[k]
+                } else {
+                    ce[k] * cu[k + t]
+                }
             };
-            let len = z.len();
-            let total: f64 = z.iter().sum();
+            let total: f64 = (0..len).map(z).sum();
             let mean = total / len.max(1) as f64;
-            let mut prefix = Vec::with_capacity(len + 1);
-            prefix.push(0.0);
-            for x in &z {
-                prefix.push(prefix[prefix.len() - 1] + x);
+            let (mut head, mut tail, mut correction) = (0.0, 0.0, 0.0);
+            for j in 0..=max_lag.min(len.saturating_sub(1)) {
+                if j > 0 {
+                    head += z(j - 1);
+                    tail += z(len - j);
+                }
+                correction += bartlett_weight(j, max_lag)
+                    * (-mean * (2.0 * total - head - tail) + (len - j) as f64 * mean * mean);
             }
-            let correction: f64 = (0..=max_lag.min(len.saturating_sub(1)))
-                .map(|j| {
-                    let w = if j == 0 {
-                        1.0
-                    } else {
-                        2.0 * (1.0 - j as f64 / (max_lag as f64 + 1.0))
-                    };
-                    w * (-mean * (prefix[len - j] + total - prefix[j])
-                        + (len - j) as f64 * mean * mean)
-                })
-                .sum();
             weighted[i] + correction
         })
         .collect()
