@@ -13,10 +13,17 @@
 //! of time constant T_f = n_f h, as an embedded controller computes them: unfiltered, the
 //! derivative term is an explicit negative inertia that makes a wheel with no load (slipping,
 //! lifted) unstable whenever its gain on the wheel's own acceleration, as a torque,
-//! k_eff = (k_a/R_a)·k_D (wheel-PD) or (k_a/R_a)(K_DT r/2 + K_DR r/d) (v/ω-PD), exceeds
-//! 2 I_e T_f/h. So n_f = max(1, k_eff/I_e): a free wheel's loop keeps a margin of 2
-//! (Khepera-like: n_f = 1; Pioneer-like: n_f ≈ 3.8). The filter lags the derivative term by
-//! about T_f ≪ the robot's time constants (θ1 bias ≈ its share of θ1 × T_f/θ1: < 0.2 %).
+//! k_eff = (k_a/R_a)·k_D (wheel-PD) or (k_a/R_a)(K_DT r/2 + K_DR r/d) (v/ω-PD), times the
+//! gain of the rates it differentiates at the Nyquist frequency, exceeds 2 I_e T_f/h. Those
+//! rates are extrapolated to the step's midpoint, ω + (ω − ω_prev)/2, whose gain at the
+//! Nyquist frequency is 2 (an alternating sequence doubles). So n_f = max(1, 2 k_eff/I_e): a
+//! free wheel's loop keeps a margin of 2 (Khepera-like: 2 k_eff/I_e = 0.42, n_f = 1;
+//! Pioneer-like: n_f ≈ 7.6). Without the factor 2 (n_f ≈ 3.8) the Pioneer-like robot's loop
+//! had no margin left: on a slippery floor (μ = 0.05) its unloaded wheels went unstable, the
+//! controller asked 64 kV and the wheels spun at 78 m/s, both at once, so the encoders read
+//! ω = 0 (`tests/physics.rs`, `a_slipping_pioneer_keeps_its_wheels_on_their_setpoints`). The
+//! filter lags the derivative term by about T_f ≪ the robot's time constants (θ1 bias ≈ its
+//! share of θ1 × T_f/θ1: < 0.3 %).
 //!
 //! Controller and motor are continuous-time elements integrated by the engine's step: the
 //! torque held over a step is evaluated at the step's midpoint, with the wheel rates
@@ -33,6 +40,10 @@
 //! by about θ4·T_c/2 and θ6·T_c/2 (a physical effect of a slow controller, not of the engine).
 
 use super::profile::{Controller, PhysicalProfile};
+
+/// Gain of the midpoint extrapolation ω + (ω − ω_prev)/2 at the Nyquist frequency, |1.5 + 0.5|
+/// (module docs).
+const MIDPOINT_NYQUIST_GAIN: f64 = 2.0;
 
 /// Controller and motor state of both wheels.
 #[derive(Debug, Clone)]
@@ -91,13 +102,14 @@ impl Drive {
         (u, mid)
     }
 
-    /// n_f = max(1, k_eff/I_e): the derivative filter's time constant in steps (module docs).
+    /// n_f = max(1, 2 k_eff/I_e): the derivative filter's time constant in steps, the 2 the
+    /// midpoint extrapolation's gain at the Nyquist frequency (module docs).
     pub fn filter_steps(p: &PhysicalProfile) -> f64 {
         let gain = match p.controller {
             Controller::WheelPd { k_d, .. } => k_d,
             Controller::VwPd { k_dt, k_dr, .. } => k_dt * p.r / 2.0 + k_dr * p.r / p.d,
         };
-        (p.k_a / p.r_a * gain / p.i_e).max(1.0)
+        (MIDPOINT_NYQUIST_GAIN * p.k_a / p.r_a * gain / p.i_e).max(1.0)
     }
 
     /// The wheel rates [rad/s] at the middle of the coming step, extrapolated from `rates`
