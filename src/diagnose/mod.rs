@@ -37,7 +37,9 @@
 //!    residual or is at least halved — for an effect smooth in its parameter this nearly
 //!    follows from the fit; it bites for the limits, whose pattern is a probe at a level read
 //!    off the data, and for a candidate standing in for another effect; the validation cost
-//!    is the main guard). The first candidate that passes and up to two more compete on
+//!    is the main guard; not asked once every channel's validation fit is at least
+//!    [`PRACTICAL_FIT_PERCENT`], where the scale-free statistic keeps its size on a residual a
+//!    hundred times smaller). The first candidate that passes and up to two more compete on
 //!    Akaike's criterion over the validation blocks, n_eff ln(J₁/J₀) + 2k, n_eff discounted for
 //!    the residual's lag-1 autocorrelation. Then the search starts again from the extended
 //!    model (forward selection, at most [`DiagnoseSettings::max_effects`], until every channel
