@@ -165,13 +165,12 @@ fn a_csv_replays_the_real_husky() {
 /// One plugin build at a time: the fault builds overwrite the same library file.
 static BUILD: Mutex<()> = Mutex::new(());
 
-/// Builds the example plugin with `feature` (or none) and copies the library to a fresh file
-/// under `dir` (a library is loaded once per path, and never unloaded).
+/// Builds the example plugin with `feature` (or none) and returns the library cargo left.
 ///
 /// The build is `cargo test --workspace --no-run`, the same resolution as the workspace's test
 /// run that is running this test: without a feature it is already built (nothing recompiles),
 /// with one only the plugin crate does.
-fn build_plugin(feature: Option<&str>, dir: &Path) -> PathBuf {
+fn built_plugin(feature: Option<&str>) -> PathBuf {
     let mut cmd = Command::new(env!("CARGO"));
     cmd.args([
         "test",
@@ -203,6 +202,13 @@ fn build_plugin(feature: Option<&str>, dir: &Path) -> PathBuf {
         })
         .find(|f| f.extension().is_some_and(|e| e == "so" || e == "dylib"))
         .expect("the cdylib artifact");
+    built
+}
+
+/// Builds the example plugin with `feature` (or none) ([`built_plugin`]) and copies the library
+/// to a fresh file under `dir` (a library is loaded once per path, and never unloaded).
+fn build_plugin(feature: Option<&str>, dir: &Path) -> PathBuf {
+    let built = built_plugin(feature);
     let copy = dir.join(format!(
         "libturtlebot_{}.so",
         feature.unwrap_or("good").replace('-', "_")
@@ -251,23 +257,23 @@ fn every_example_config_is_a_run_config_and_the_plugin_one_runs_as_its_comment_s
     }
     assert!(n >= 7, "{n} configs");
     // run_plugin.toml names the plugin by its bare name, found beside the `wheelid` executable;
-    // its comment says to build it first in wheelid's profile, which this does (a test build
-    // leaves the library in deps/ only).
+    // its comment says to build it first (`cargo build -p wheelid-turtlebot-plugin`), which
+    // leaves the library beside the executable. The library is put there from this test run's
+    // own build of the plugin (the same sources and profile): a `cargo build -p` of the plugin
+    // alone resolves features for that package only, so it recompiled nalgebra, serde,
+    // wheelid-core and wheelid-models in the middle of the test run (~2 min on CI's 2 cores).
     let _one = BUILD.lock().unwrap_or_else(|e| e.into_inner());
     let exe = Path::new(env!("CARGO_BIN_EXE_wheelid"));
-    let release = exe
-        .parent()
-        .and_then(Path::file_name)
-        .is_some_and(|p| p == "release");
-    let mut build = Command::new(env!("CARGO"));
-    build
-        .args(["build", "--locked", "-p", "wheelid-turtlebot-plugin"])
-        .current_dir(env!("CARGO_MANIFEST_DIR"));
-    if release {
-        build.arg("--release");
-    }
-    let o = build.output().expect("cargo runs");
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let beside = exe.parent().expect("the executable's folder").join(format!(
+        "{}wheelid_turtlebot_plugin{}",
+        std::env::consts::DLL_PREFIX,
+        std::env::consts::DLL_SUFFIX
+    ));
+    let built = built_plugin(None);
+    // Renamed into place: a library another process has mapped is replaced, never rewritten.
+    let staged = beside.with_extension("staged");
+    std::fs::copy(&built, &staged).expect("copy");
+    std::fs::rename(&staged, &beside).expect("rename");
     let o = Command::new(env!("CARGO_BIN_EXE_wheelid"))
         .args(["run"])
         .arg(config("run_plugin.toml"))
