@@ -185,7 +185,7 @@ fn built_plugin(feature: Option<&str>) -> PathBuf {
     }
     let o = cmd.output().expect("cargo runs");
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let built = String::from_utf8_lossy(&o.stdout)
+    String::from_utf8_lossy(&o.stdout)
         .lines()
         .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
         .filter(|v| v["reason"] == "compiler-artifact")
@@ -201,8 +201,7 @@ fn built_plugin(feature: Option<&str>) -> PathBuf {
                 .collect::<Vec<_>>()
         })
         .find(|f| f.extension().is_some_and(|e| e == "so" || e == "dylib"))
-        .expect("the cdylib artifact");
-    built
+        .expect("the cdylib artifact")
 }
 
 /// Builds the example plugin with `feature` (or none) ([`built_plugin`]) and copies the library
