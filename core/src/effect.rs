@@ -18,7 +18,12 @@
 //!                                                   Terms::coulomb, Terms::slip
 //! each wheel's effort scaled, clamped (g (u − v))   Terms::wheels       [-, m/s]
 //! θ1, θ2, θ3, θ5 replaced from a time on            Terms::payload
+//! each wheel's grip on the floor limited             Terms::traction     [m/s², -, -]
 //! ```
+//!
+//! The traction stage splits the inertia: a share ε of θ1, θ2 turns with the wheels (what the
+//! encoders see), the rest is the body, and each wheel passes the body at most a limited force
+//! ([`Traction`]; in grip it is eq. 2.19 exactly).
 //!
 //! plus any state-dependent generalised [`Force`] an effect adds to the right-hand sides
 //! ([`Effect::force`], e.g. dry friction per wheel, sign(v ± dω/2)). An effect whose physics fits
@@ -50,7 +55,43 @@ pub struct Terms {
     pub slip: [f64; 2],
     /// Per-wheel efforts: a gain on the right wheel's, a clamp ([`WheelTerms`]).
     pub wheels: Option<WheelTerms>,
+    /// Each wheel's grip on the floor limited ([`Traction`]).
+    pub traction: Option<Traction>,
 }
+
+/// A traction limit (`traction_limit`): the wheels and the body as two inertias, θ1, θ2 split
+/// into a share `wheel_share` ε on the wheels' side and 1 − ε on the body's, coupled at each
+/// wheel's contact by a force that saturates at the floor's grip. With (v_w, ω_w) the wheels'
+/// speeds (the encoders'), (v_b, ω_b) the body's, f = (f_v, f_ω) eq. 2.19's right-hand side at
+/// the wheels' speeds and T = (T_v, T_ω) the force passed to the body:
+///
+/// ```text
+/// ε θ1 v̇_w = f_v − T_v        (1 − ε) θ1 v̇_b = T_v
+/// ε θ2 ω̇_w = f_ω − T_ω        (1 − ε) θ2 ω̇_b = T_ω
+/// t_R,L = T_v ± κ T_ω = c tanh(s_R,L / s0),   s_R,L = (v_w − v_b) ± (d/2)(ω_w − ω_b)
+/// ```
+///
+/// with c = (1 − ε) θ1 a_max (a straight run accelerates at most at `accel_max`), κ = `mix` ×
+/// d/2 and the slip scale s0 of [`TRACTION_SLIP_SHARE`]. In grip (s → 0) the sum of each
+/// pair is eq. 2.19. Source: the rigid-wheel/Coulomb-contact picture of Siegwart & Nourbakhsh,
+/// *Introduction to Autonomous Mobile Robots* (2011) §3.2 (a wheel rolls without slipping only
+/// while the floor can pass its force), with the thesis's eq. 2.19 as the gripping limit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Traction {
+    /// Largest straight-line body acceleration the floor passes, μ g × the driven wheels' share
+    /// of the weight [m/s²].
+    pub accel_max: f64,
+    /// Share ε of θ1, θ2 on the wheels' side of the contact (wheels, gears, rotors) [-].
+    pub wheel_share: f64,
+    /// κ relative to d/2 [-] (each wheel's share of the ω force, as [`WheelTerms::mix`]).
+    pub mix: f64,
+}
+
+/// The grip's compliance: a wheel's traction reaches tanh(1) ≈ 76 % of its limit c at the slip
+/// speed s0 = a_max × this × τ, τ = min(θ1/θ4, θ2/θ6) [-]. In grip the wheels then lead the
+/// body by about 2 % of τ (s ≈ 0.02 τ v̇), and the grip relaxes 1/(0.02 ε) times faster than
+/// τ: stiff, but bounded whatever the limit.
+pub const TRACTION_SLIP_SHARE: f64 = 0.02;
 
 /// The speed loop's effort per wheel (`amp_asymmetry`, `effort_clamp`): with E_v = u_v − g v,
 /// E_ω = u_ω − g ω the loop's efforts in eq. 2.19, the wheels' e_R,L = E_v ± κ E_ω

@@ -22,7 +22,9 @@ pub mod signal;
 pub mod solver;
 
 pub use condition::{ConditionSettings, Conditioned, CutoffChoice};
-pub use effect::{Effect, EffectChannels, Force, Probe, Search, Terms, WheelTerms};
+pub use effect::{
+    Effect, EffectChannels, Force, Probe, Search, TRACTION_SLIP_SHARE, Terms, Traction, WheelTerms,
+};
 pub use error::{Error, Location, Result};
 pub use estimator::{Estimate, Estimator, EstimatorInput, FreeRun, TimingReport, TimingSource};
 pub use model::{

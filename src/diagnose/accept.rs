@@ -172,11 +172,13 @@ pub(super) fn verdict(
 }
 
 /// Effect size of what a fingerprint leaves (issue 15: a test statistic keeps its size on a
-/// long, quiet recording even when the fit is near perfect): a candidate whose parameters are
-/// steps along its pattern's columns (gradient probes: not a limit's level probe) leaves a small
-/// effect when one more Gauss–Newton step along the pattern, `beta_left` (in the parameters'
-/// units), would move each fitted parameter by at most [`EFFECT_LEFT`] of its distance from
-/// the null.
+/// long, quiet recording even when the fit is near perfect). For a gradient probe the
+/// candidate's parameters are steps along its pattern's columns: a small effect is left when
+/// one more Gauss–Newton step along the pattern, `beta_left` (in the parameters' units), would
+/// move each fitted parameter by at most [`EFFECT_LEFT`] of its distance from the null. A
+/// limit's level probe is the whole effect at the probed level (its column is the simulation
+/// there less the nominal one): a small effect is left when the new residual holds at most
+/// [`EFFECT_LEFT`] of that whole effect (|β| ≤ 0.2).
 fn small_effect_left(
     c: Candidate,
     new: &Current,
@@ -185,7 +187,7 @@ fn small_effect_left(
     data: &Data,
 ) -> bool {
     if matches!(c.effect().search(), Search::Limit { .. }) {
-        return false;
+        return beta_left.iter().all(|b| b.abs() <= EFFECT_LEFT);
     }
     let base = new.theta.len() - c.params().len();
     let (t_lo, t_hi) = data.span();

@@ -11,6 +11,7 @@ mod gain_drift;
 mod input_delay;
 mod payload_change;
 mod slip;
+mod traction_limit;
 mod velocity_saturation;
 mod wheel_asymmetry;
 mod wheel_friction;
@@ -26,12 +27,13 @@ pub use gain_drift::GainDrift;
 pub use input_delay::InputDelay;
 pub use payload_change::PayloadChange;
 pub use slip::Slip;
+pub use traction_limit::TractionLimit;
 pub use velocity_saturation::VelocitySaturation;
 pub use wheel_asymmetry::WheelAsymmetry;
 pub use wheel_friction::WheelFriction;
 
 /// The registry: every built-in effect, in the order the diagnosis reports them.
-pub static EFFECTS: [&dyn Effect; 11] = [
+pub static EFFECTS: [&dyn Effect; 12] = [
     &InputDelay,
     &AccelerationLimit,
     &VelocitySaturation,
@@ -43,6 +45,7 @@ pub static EFFECTS: [&dyn Effect; 11] = [
     &WheelFriction,
     &EffortClamp,
     &AmpAsymmetry,
+    &TractionLimit,
 ];
 
 /// A value far beyond any command: a limit at this level never binds (a limit's null).
@@ -104,6 +107,8 @@ impl Candidate {
     pub const EFFORT_CLAMP: Candidate = Candidate(&EffortClamp);
     /// Right/left effort gain mismatch ([`AmpAsymmetry`]).
     pub const AMP_ASYMMETRY: Candidate = Candidate(&AmpAsymmetry);
+    /// Each wheel's grip on the floor limited ([`TractionLimit`]).
+    pub const TRACTION_LIMIT: Candidate = Candidate(&TractionLimit);
 
     /// A candidate for any effect (a built-in one of [`EFFECTS`] or the caller's own).
     pub fn new(effect: &'static dyn Effect) -> Self {

@@ -1,0 +1,351 @@
+//! The traction stage ([`wheelid_core::Traction`]): the wheels and the body as two inertias
+//! coupled at each wheel's contact by a force that saturates at the floor's grip. The encoders
+//! see the wheels, so on a slippery floor they run ahead of the body at high demand, and the
+//! body's speed (not the wheels') decides when they grip again.
+//!
+//! State z = (v_b, ω_b, s_R, s_L): the body's speeds and each wheel's slip speed at its contact
+//! (wheel rim less body), so that the wheels' speeds are v_w = v_b + (s_R + s_L)/2 and
+//! ω_w = ω_b + (s_R − s_L)/d. With f eq. 2.19's right-hand side at the wheels' speeds (every
+//! other stage applied as in the module docs of [`super`]), t_R,L = c tanh(s_R,L/s0) and
+//! T = ((t_R + t_L)/2, (t_R − t_L)/(2κ)):
+//!
+//! ```text
+//! v̇_b = T_v / ((1 − ε) θ1)                     ω̇_b = T_ω / ((1 − ε) θ2)
+//! ṡ_R,L = (v̇_w − v̇_b) ± (d/2)(ω̇_w − ω̇_b),     v̇_w = (f_v − T_v)/(ε θ1), ω̇_w = (f_ω − T_ω)/(ε θ2)
+//! ```
+//!
+//! The grip is stiff (rate ≈ c/s0 × the contact's inverse inertia, ≈ 1/(0.02 ε τ)): an
+//! L-stable Rosenbrock method on equal sub-steps of τ/20 ([`ros2_step`]). Outputs are the wheels' speeds,
+//! instants or window averages as the recording says.
+
+use wheelid_core::{CommandHold, Recording, Result, TRACTION_SLIP_SHARE, Terms, Traction};
+
+use super::{
+    Cmd, CommandCursor, Extended, Field, Forces, Setpoints, holding_command, merged_grid,
+    to_samples,
+};
+use crate::dynamics;
+
+/// Sub-steps per shortest time constant min(θ1/θ4, θ2/θ6) ([`ros2_step`] is L-stable: the
+/// grip's stiffness does not limit it, the accuracy of the slow motion does).
+const STEPS_PER_TAU: f64 = 40.0;
+
+/// One step of Verwer's two-stage Rosenbrock method ROS2 (γ = 1 + 1/√2; 2nd order,
+/// L-stable; Verwer, Spee, Blom & Hundsdorfer, SIAM J. Sci. Comput. 20 (1999) 1456) on
+/// ż = f(z, u) from `u0` to `u1` over `h`, the Jacobian ∂f/∂z by forward differences at the
+/// step's start; adds the trapezoidal ∫z over the step to `q`.
+fn ros2_step<U>(
+    f: impl Fn(&[f64; 4], &U) -> [f64; 4],
+    z: &mut [f64; 4],
+    q: &mut [f64; 4],
+    u0: &U,
+    u1: &U,
+    h: f64,
+) {
+    const GAMMA: f64 = 1.0 + std::f64::consts::FRAC_1_SQRT_2;
+    let f0 = f(z, u0);
+    let mut w = nalgebra::Matrix4::<f64>::identity();
+    for j in 0..4 {
+        let d = 1e-7 * (1.0 + z[j].abs());
+        let mut zj = *z;
+        zj[j] += d;
+        let fj = f(&zj, u0);
+        for i in 0..4 {
+            w[(i, j)] -= GAMMA * h * (fj[i] - f0[i]) / d;
+        }
+    }
+    let Some(lu) = Some(w.lu()).filter(|lu| lu.is_invertible()) else {
+        z.iter_mut().for_each(|x| *x = f64::NAN);
+        return;
+    };
+    let solve = |b: [f64; 4]| {
+        lu.solve(&nalgebra::Vector4::from(b))
+            .map_or([f64::NAN; 4], |x| [x[0], x[1], x[2], x[3]])
+    };
+    let k1 = solve(f0);
+    let z1: [f64; 4] = std::array::from_fn(|i| z[i] + h * k1[i]);
+    let f1 = f(&z1, u1);
+    let k2 = solve(std::array::from_fn(|i| f1[i] - 2.0 * k1[i]));
+    let start = *z;
+    for i in 0..4 {
+        z[i] += h * (1.5 * k1[i] + 0.5 * k2[i]);
+        q[i] += 0.5 * h * (start[i] + z[i]);
+    }
+}
+
+/// The contact's constants for θ = `th`: the limit c, the slip scale s0, κ, and the sub-step
+/// RK4 needs for the grip's stiffness.
+#[derive(Debug, Clone, Copy)]
+struct Contact {
+    /// Largest wheel force c = (1 − ε) θ1 a_max [m/s].
+    c: f64,
+    /// Slip scale s0 = a_max × [`TRACTION_SLIP_SHARE`] × min(θ1/θ4, θ2/θ6) [m/s].
+    s0: f64,
+    /// Share ε of the inertia on the wheels' side.
+    eps: f64,
+    /// Force mixing κ = mix × d/2 \[m\].
+    kappa: f64,
+    /// Half track d/2 \[m\].
+    half: f64,
+}
+
+impl Contact {
+    fn new(tr: &Traction, th: &[f64; 6], track: f64) -> Self {
+        let eps = tr.wheel_share;
+        Self {
+            c: (1.0 - eps) * th[0] * tr.accel_max,
+            s0: tr.accel_max
+                * TRACTION_SLIP_SHARE
+                * (th[0] / th[3]).abs().min((th[1] / th[5]).abs()),
+            eps,
+            kappa: tr.mix * 0.5 * track,
+            half: 0.5 * track,
+        }
+    }
+
+    /// ż for z = (v_b, ω_b, s_R, s_L), given f(v_w, ω_w) (eq. 2.19's right-hand side divided by
+    /// θ1, θ2, as [`Field::rhs`] gives it).
+    #[inline(always)]
+    fn rhs(&self, th: &[f64; 6], z: &[f64; 4], f: impl Fn(f64, f64) -> [f64; 2]) -> [f64; 4] {
+        let [vb, wb, sr, sl] = *z;
+        let (vw, ww) = (vb + 0.5 * (sr + sl), wb + (sr - sl) / (2.0 * self.half));
+        let fa = f(vw, ww);
+        let (dv, dw) = (fa[0] * th[0], fa[1] * th[1]);
+        let (tr, tl) = (
+            self.c * (sr / self.s0).tanh(),
+            self.c * (sl / self.s0).tanh(),
+        );
+        let (tv, tw) = (0.5 * (tr + tl), (tr - tl) / (2.0 * self.kappa));
+        let e = self.eps;
+        let (vb_dot, wb_dot) = (tv / ((1.0 - e) * th[0]), tw / ((1.0 - e) * th[1]));
+        let (vw_dot, ww_dot) = ((dv - tv) / (e * th[0]), (dw - tw) / (e * th[1]));
+        let (rv, rw) = (vw_dot - vb_dot, self.half * (ww_dot - wb_dot));
+        [vb_dot, wb_dot, rv + rw, rv - rw]
+    }
+
+    /// The wheels' speeds (v_w, ω_w) of state (or state integral) `z`.
+    fn wheels(&self, z: &[f64; 4]) -> [f64; 2] {
+        [
+            z[0] + 0.5 * (z[2] + z[3]),
+            z[1] + (z[2] - z[3]) / (2.0 * self.half),
+        ]
+    }
+}
+
+impl Extended {
+    /// The simulation of the module doc under the traction stage `tr` on the recording's
+    /// samples: the wheels' speeds (v̂, ω̂), starting in grip at `initial`.
+    ///
+    /// # Errors
+    /// As [`super::Extended::simulate`]: a bad initial state or grid.
+    pub(super) fn integrate_traction(
+        &self,
+        th0: &[f64; 6],
+        ph: &Terms,
+        forces: &Forces,
+        rec: &Recording,
+        initial: &[f64],
+        tr: &Traction,
+    ) -> Result<[Vec<f64>; 2]> {
+        let &[v0, w0] = initial else {
+            return Err(wheelid_core::Error::InvalidSetting(format!(
+                "initial state must be [v, ω], got {} values",
+                initial.len()
+            )));
+        };
+        let extra: Vec<f64> = ph.payload.map(|(t, _)| t).into_iter().collect();
+        let (grid, index) = merged_grid(rec, ph.delay, &extra)?;
+        let th_after = ph
+            .payload
+            .map(|(_, a)| [a[0], a[1], a[2], th0[3], a[3], th0[5]]);
+        let zoh = rec.command_hold() == CommandHold::Zoh;
+        let avg = rec.velocity_sampling() == wheelid_core::VelocitySampling::WindowAverage;
+        let t0 = rec.t[0];
+        let hold = holding_command(th0, initial);
+        let mut cursor = CommandCursor::new(rec, hold);
+        let mut command = |tau: f64| {
+            let c = cursor.at(tau);
+            Cmd::<0>::at([c.0, c.1], [[]; 2], false)
+        };
+        let pipe = Setpoints {
+            ph,
+            track: self.track,
+            t0,
+        };
+        let field = Field::new(forces, self.track, ph);
+        let prepare = |th: [f64; 6], after: bool| {
+            let contact = Contact::new(tr, &th, self.track);
+            let tau = (th[0] / th[3]).abs().min((th[1] / th[5]).abs());
+            let h = (tau / STEPS_PER_TAU).min(dynamics::substep(&th));
+            (th, [1.0 / th[0], 1.0 / th[1]], after, contact, h)
+        };
+        let (before, after) = (prepare(*th0, false), th_after.map(|a| prepare(a, true)));
+        let mut setpoint = if ph.accel.is_some() {
+            Cmd::at([hold.0, hold.1], [[]; 2], false)
+        } else {
+            pipe.target(command(t0 - ph.delay))
+        };
+        let mut z = [v0, w0, 0.0, 0.0];
+        let mut y: [Vec<f64>; 2] = [vec![v0], vec![w0]];
+        for i in 1..grid.len() {
+            let (ta, tb) = (grid[i - 1], grid[i]);
+            let span = tb - ta;
+            let (th, inv, changed, contact, h_max) = match (ph.payload, after) {
+                (Some((ts, _)), Some(a)) if 0.5 * (ta + tb) >= ts => a,
+                _ => before,
+            };
+            let ca = command(if zoh { 0.5 * (ta + tb) } else { ta } - ph.delay);
+            let cb = if zoh { ca } else { command(tb - ph.delay) };
+            let n = (span / h_max).ceil().max(1.0) as usize;
+            let h = span / n as f64;
+            let mut q = [0.0; 4];
+            for k in 0..n {
+                let (f0, f1) = (k as f64 / n as f64, (k + 1) as f64 / n as f64);
+                let s0 = setpoint;
+                let s1 = pipe.slew(s0, pipe.target(ca.lerp(&cb, f1)), h);
+                let s_start = if ph.accel.is_some() {
+                    s0
+                } else {
+                    pipe.target(ca.lerp(&cb, f0))
+                };
+                setpoint = s1;
+                let (u0, u1) = (
+                    pipe.shaped(&s_start, ta + f0 * span),
+                    pipe.shaped(&s1, ta + f1 * span),
+                );
+                let rhs = |x: &[f64; 4], c: &Cmd<0>| {
+                    contact.rhs(&th, x, |v, w| {
+                        field.rhs::<2, 0>(&th, &inv, changed, &[v, w], c)
+                    })
+                };
+                ros2_step(rhs, &mut z, &mut q, &u0, &u1, h);
+            }
+            if z.iter().any(|x| !x.is_finite()) {
+                return Err(wheelid_core::Error::InvalidSetting(
+                    "the traction model does not simulate (finitely)".into(),
+                ));
+            }
+            let out = if avg {
+                contact.wheels(&q).map(|x| x / span)
+            } else {
+                contact.wheels(&z)
+            };
+            y[0].push(out[0]);
+            y[1].push(out[1]);
+        }
+        Ok(to_samples(&y, &grid, &index, avg))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::effects::Candidate;
+    use wheelid_core::DynamicModel;
+
+    /// A straight drive: θ3 = θ5 = 0, θ4 = θ6 = 1.
+    const THETA: [f64; 6] = [0.26, 0.25, 0.0, 1.0, 0.0, 1.0];
+
+    fn recording(n: usize, dt: f64, f: impl Fn(f64) -> (f64, f64)) -> Recording {
+        let t: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
+        let (vr, wr): (Vec<f64>, Vec<f64>) = t.iter().map(|&x| f(x)).unzip();
+        let mut rec = Recording::new("x", t, vr, wr, vec![0.0; n], vec![0.0; n]).expect("valid");
+        rec.set_meta("command_hold", "zoh");
+        rec
+    }
+
+    fn traction(theta: &[f64; 6], a: f64, eps: f64, rec: &Recording) -> Vec<Vec<f64>> {
+        let e = Extended::new(&[Candidate::TRACTION_LIMIT], 0.33).expect("model");
+        let mut th = theta.to_vec();
+        th.extend([a, eps, 1.0]);
+        e.simulate(&th, rec, &[0.0, 0.0]).expect("sim")
+    }
+
+    /// In grip the wheels and the body move as one: eq. 2.19 up to the grip's compliance,
+    /// the wheels leading by ≈ 2 % of τ (|Δv| ≤ 0.03 τ max|v̇|).
+    #[test]
+    fn in_grip_it_is_eq_2_19() {
+        let rec = recording(200, 0.1, |x| {
+            (0.3 + 0.2 * (0.9 * x).sin(), 0.5 * (0.5 * x).cos())
+        });
+        let plain = Extended::new(&[], 0.33)
+            .expect("model")
+            .simulate(&THETA, &rec, &[0.0, 0.0])
+            .expect("sim");
+        let got = traction(&THETA, 50.0, 0.1, &rec);
+        for ch in 0..2 {
+            let accel = plain[ch]
+                .windows(2)
+                .fold(0.0f64, |m, w| m.max((w[1] - w[0]).abs() / 0.1));
+            let tau = THETA[ch] / THETA[3 + 2 * ch];
+            for k in 0..rec.len() {
+                let d = (got[ch][k] - plain[ch][k]).abs();
+                assert!(d <= 0.03 * tau * accel + 1e-6, "ch {ch} k {k}: {d}");
+            }
+        }
+    }
+
+    /// A step to 1 m/s beyond the grip (a_max = 0.2 m/s²): the wheels spin up alone (inertia
+    /// ε θ1) to the plateau (u − c)/θ4, c = (1 − ε) θ1 a_max, while the body accelerates at
+    /// a_max; they grip again when the body reaches the wheels, at t* = plateau / a_max, and then
+    /// rise with the whole inertia to u/θ4.
+    /// (Closed forms of the two-inertia model with a saturated contact.)
+    #[test]
+    fn beyond_the_grip_the_wheels_run_ahead_until_the_body_catches_up() {
+        let (a, eps, u) = (0.2, 0.1, 1.0);
+        let rec = recording(1000, 0.02, |_| (u, 0.0));
+        let v = &traction(&THETA, a, eps, &rec)[0];
+        let c = (1.0 - eps) * THETA[0] * a;
+        let plateau = (u - c) / THETA[3];
+        let t_grip = plateau / a;
+        for (k, &vk) in v.iter().enumerate() {
+            let t = rec.t[k];
+            if t > 10.0 * eps * THETA[0] && t < t_grip - 0.3 {
+                approx::assert_abs_diff_eq!(vk, plateau, epsilon = 2e-3);
+            }
+            if t > t_grip + 8.0 * THETA[0] {
+                approx::assert_abs_diff_eq!(vk, u / THETA[3], epsilon = 2e-3);
+            }
+        }
+        // The plateau ends near t*: a little before it, as the contact's compliance lets the
+        // traction fall off over the last few s0 of slip (≈ 0.1 s here).
+        let end = v
+            .iter()
+            .position(|&x| x > plateau + 1e-3)
+            .map(|k| rec.t[k])
+            .expect("the plateau ends");
+        assert!(end > t_grip - 0.15 && end <= t_grip, "{end} vs {t_grip}");
+    }
+
+    /// The traction stage has no sensitivity equations: every column comes by differences,
+    /// and they agree with central differences of the simulation.
+    #[test]
+    fn its_sensitivities_are_the_simulations_differences() {
+        let rec = recording(300, 0.02, |x| {
+            (0.8 * (x * 2.0).sin(), 2.0 * (x * 1.3).cos())
+        });
+        let e = Extended::new(&[Candidate::TRACTION_LIMIT], 0.33).expect("model");
+        let mut th = THETA.to_vec();
+        th.extend([0.5, 0.15, 1.2]);
+        let (y, s) = e
+            .sensitivities_of(&th, &rec, &[0.0, 0.0], &[0, 6, 7])
+            .expect("sens");
+        for (a, &j) in [0usize, 6, 7].iter().enumerate() {
+            let h = 1e-4 * th[j].abs();
+            let (mut up, mut down) = (th.clone(), th.clone());
+            up[j] += h;
+            down[j] -= h;
+            let yu = e.simulate(&up, &rec, &[0.0, 0.0]).expect("sim");
+            let yd = e.simulate(&down, &rec, &[0.0, 0.0]).expect("sim");
+            for c in 0..2 {
+                let scale = (0..rec.len()).fold(1e-9f64, |m, k| m.max(s.theta[c][(k, a)].abs()));
+                for k in 0..rec.len() {
+                    let central = (yu[c][k] - yd[c][k]) / (2.0 * h);
+                    let d = (s.theta[c][(k, a)] - central).abs();
+                    assert!(d <= 0.02 * scale, "column {j} ch {c} k {k}: {d} of {scale}");
+                }
+            }
+        }
+        assert_eq!(y.len(), 2);
+    }
+}
