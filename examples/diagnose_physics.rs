@@ -58,7 +58,8 @@ use wheelid::robots::physics::{
 /// the loop holds the wheel's rate whatever its radius, and the larger tyre shows only as that
 /// wheel's share of the chassis inertia growing, i.e. its effort acting weaker in transients
 /// (`amp_asymmetry` is accepted for it; the pose would tell them apart, the encoders do not); dry friction in the wheel joints is a
-/// Coulomb term (`coulomb_friction`); a slippery floor loses speed at high demand (`slip`).
+/// Coulomb term (`coulomb_friction`); on a slippery floor the wheels run ahead of the body at
+/// high demand (`traction_limit`; the older setpoint-level `slip` is still accepted).
 pub const TRUTH: [(&str, &[&str]); 10] = [
     ("latency", &["input_delay", "latency"]),
     ("rate_limit", &["acceleration_limit"]),
@@ -503,7 +504,8 @@ pub fn draw_effects(
 /// `v_coulomb`, `w_coulomb` and `wheel_friction`'s `c_wheel` (the map's θ4, θ6 × the
 /// closed-form steady loss, [`friction_loss_per_nm`]; `coulomb_friction` acts on v and ω, not
 /// per wheel, so its values are a looser match); payload time vs `time_s` and the loaded map's θ1 vs
-/// `theta1_after`. Everything else is `n/a`.
+/// `theta1_after`; a slippery floor's μ g (1 − b/x_c) (the driven wheels' share of the weight)
+/// vs `accel_max`. Everything else is `n/a`.
 pub fn magnitudes(
     p: &PhysicalProfile,
     truth: &BTreeMap<String, BTreeMap<String, f64>>,
@@ -599,6 +601,14 @@ pub fn magnitudes(
                     false,
                 );
             }
+            // The driven wheels carry the weight less the caster's share b/x_c (statics of
+            // the chassis on its three contacts): the floor passes at most μ g (1 − b/x_c).
+            "floor_mu" => push(
+                "μ g (1 − b/x_c) vs accel_max",
+                g("mu") * 9.81 * (1.0 - p.b / p.caster_x),
+                est("accel_max"),
+                false,
+            ),
             "payload" => {
                 push("at_s vs time_s", g("at_s"), est("time_s"), false);
                 push(
