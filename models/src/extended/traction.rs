@@ -73,8 +73,7 @@ fn ros2_step<U>(
     }
 }
 
-/// The contact's constants for θ = `th`: the limit c, the slip scale s0, κ, and the sub-step
-/// RK4 needs for the grip's stiffness.
+/// The contact's constants for θ = `th`: the limit c, the slip scale s0, ε, κ and d/2.
 #[derive(Debug, Clone, Copy)]
 struct Contact {
     /// Largest wheel force c = (1 − ε) θ1 a_max [m/s].
