@@ -223,11 +223,23 @@ pub(super) fn level_grid(
     theta: &[f64],
     base: usize,
     active: &[usize],
-    cost: &dyn Fn(&[f64]) -> f64,
+    cost: &(dyn Fn(&[f64]) -> f64 + Sync),
 ) -> Vec<f64> {
-    let mut best = (cost(theta), 1.0);
-    for f in [0.5, 0.7, 0.85, 1.2, 1.5, 2.0] {
-        let c = cost(&scaled(theta, base, active, f, 1.0));
+    // One simulation per scale, on as many threads (an expensive model's start is the last to
+    // finish while the other candidates' are done).
+    let scales = [1.0, 0.5, 0.7, 0.85, 1.2, 1.5, 2.0];
+    let costs: Vec<f64> = std::thread::scope(|sc| {
+        let handles: Vec<_> = scales
+            .iter()
+            .map(|&f| sc.spawn(move || cost(&scaled(theta, base, active, f, 1.0))))
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| h.join().unwrap_or(f64::INFINITY))
+            .collect()
+    });
+    let mut best = (costs[0], 1.0);
+    for (&c, &f) in costs.iter().zip(&scales).skip(1) {
         if c < best.0 {
             best = (c, f);
         }

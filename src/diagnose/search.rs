@@ -234,17 +234,20 @@ fn first_accepted(
     let n_eff = data.effective_samples(&cur.sim);
     let mut best: Option<(f64, Accepted)> = None;
     let mut more = 0;
+    let mut first_start = f64::INFINITY;
     for (i, st) in ready {
+        let c = round.nominees[i].pattern.candidate;
         if best.is_some() {
-            if more == MORE_FITS {
+            if more == MORE_FITS || st.cost > RIVAL_START_FACTOR * first_start {
                 break;
             }
             more += 1;
         }
-        let c = round.nominees[i].pattern.candidate;
+        let start_cost = st.cost;
         progress.step(&format!("fitting {}", c.name()), 1);
         match fit_and_judge(&context, i, st) {
             Ok(x) => {
+                first_start = first_start.min(start_cost);
                 let score = information(n_eff, x.3, free_params(c, &x.1));
                 match best.take() {
                     Some((b, prev)) if b <= score => {
@@ -275,6 +278,12 @@ type Accepted = (usize, Current, Channels, f64);
 
 /// Fits tried after the first accepted one in a round ([`first_accepted`]).
 const MORE_FITS: usize = 2;
+
+/// A rival is fitted after the first accepted candidate only if its screened start's training
+/// cost is within this factor of the accepted one's start ([`first_accepted`]): a start that
+/// explains several times less of the residual does not come back to win on the validation
+/// blocks, and an expensive model (the traction stage) is not fitted for nothing.
+const RIVAL_START_FACTOR: f64 = 3.0;
 
 /// The free parameters candidate `c` adds in `new` (the last of its candidates).
 fn free_params(c: Candidate, new: &Current) -> usize {

@@ -235,20 +235,19 @@ impl Field {
         }
     }
 
-    /// ż for the state z = (v, ω, ∂v/∂p, ∂ω/∂p) under command `c`: θ with the reciprocals
-    /// `inv` of θ1, θ2; `changed` after a payload change, when θ1, θ2, θ3, θ5 are no longer
-    /// in force (their columns integrate without a source). Columns 0…7 are θ1…θ6, v0, ω0.
+    /// (v̇, ω̇) at (v, ω) under command `c` (θ with the reciprocals `inv` of θ1, θ2) and, with
+    /// `jac`, its Jacobian ∂(v̇, ω̇)/∂(v, ω) and the clamp's ∂(clamped − unclamped effort)/∂u
+    /// (zeros without `jac`).
     #[inline(always)]
-    fn rhs<const N: usize, const M: usize>(
+    fn local<const M: usize>(
         &self,
         th: &[f64; 6],
         inv: &[f64; 2],
-        changed: bool,
-        z: &[f64; N],
+        (v, w): (f64, f64),
         c: &Cmd<M>,
-    ) -> [f64; N] {
+        jac: bool,
+    ) -> Local {
         let [kv, kw] = self.slip;
-        let (v, w) = (z[0], z[1]);
         let u = c.u;
         // The drive gain's extra loop feedback, −(g − 1)(v, ω) (module docs).
         let lost = c.g - 1.0;
@@ -286,26 +285,51 @@ impl Field {
                 row[1] += d[1];
             }
         }
-        let mut out = [0.0; N];
-        out[0] = fv * inv[0];
-        out[1] = fw * inv[1];
-        if M == NS {
+        let mut a = [[0.0; 2]; 2];
+        if jac {
             let sign = |x: f64| if x == 0.0 { 0.0 } else { x.signum() };
-            let a00 = (-th[3] * (1.0 + kv * w.abs()) - lost - dry_v + jf[0][0]) * inv[0];
-            let a01 = (2.0 * th[2] * w - th[3] * kv * v * sign(w) + jf[0][1]) * inv[0];
-            let a10 = (-th[4] * w - th[5] * kw * sign(v) * w + jf[1][0]) * inv[1];
-            let a11 =
+            a[0][0] = (-th[3] * (1.0 + kv * w.abs()) - lost - dry_v + jf[0][0]) * inv[0];
+            a[0][1] = (2.0 * th[2] * w - th[3] * kv * v * sign(w) + jf[0][1]) * inv[0];
+            a[1][0] = (-th[4] * w - th[5] * kw * sign(v) * w + jf[1][0]) * inv[1];
+            a[1][1] =
                 (-th[4] * v - th[5] * (1.0 + kw * v.abs()) - lost - dry_w + jf[1][1]) * inv[1];
-            for a in 0..M {
-                let (sv, sw) = (z[2 + a], z[2 + M + a]);
-                out[2 + a] = a00 * sv + a01 * sw;
-                out[2 + M + a] = a10 * sv + a11 * sw;
+        }
+        Local {
+            f: [fv * inv[0], fw * inv[1]],
+            a,
+            ju,
+        }
+    }
+
+    /// ż for the state z = (v, ω, ∂v/∂p, ∂ω/∂p) under command `c`: θ with the reciprocals
+    /// `inv` of θ1, θ2; `changed` after a payload change, when θ1, θ2, θ3, θ5 are no longer
+    /// in force (their columns integrate without a source). Columns 0…7 are θ1…θ6, v0, ω0.
+    #[inline(always)]
+    fn rhs<const N: usize, const M: usize>(
+        &self,
+        th: &[f64; 6],
+        inv: &[f64; 2],
+        changed: bool,
+        z: &[f64; N],
+        c: &Cmd<M>,
+    ) -> [f64; N] {
+        let [kv, kw] = self.slip;
+        let (v, w) = (z[0], z[1]);
+        let Local { f, a, ju } = self.local(th, inv, (v, w), c, M == NS);
+        let mut out = [0.0; N];
+        out[0] = f[0];
+        out[1] = f[1];
+        if M == NS {
+            for k in 0..M {
+                let (sv, sw) = (z[2 + k], z[2 + M + k]);
+                out[2 + k] = a[0][0] * sv + a[0][1] * sw;
+                out[2 + M + k] = a[1][0] * sv + a[1][1] * sw;
             }
             if c.live {
-                for a in 0..M {
-                    let (d0, d1) = (c.du[0][a], c.du[1][a]);
-                    out[2 + a] += (d0 + ju[0][0] * d0 + ju[0][1] * d1) * inv[0];
-                    out[2 + M + a] += (d1 + ju[1][0] * d0 + ju[1][1] * d1) * inv[1];
+                for k in 0..M {
+                    let (d0, d1) = (c.du[0][k], c.du[1][k]);
+                    out[2 + k] += (d0 + ju[0][0] * d0 + ju[0][1] * d1) * inv[0];
+                    out[2 + M + k] += (d1 + ju[1][0] * d0 + ju[1][1] * d1) * inv[1];
                 }
             }
             // ∂f/∂θ: the sources of θ1…θ6's columns (v0, ω0 have none).
@@ -319,6 +343,14 @@ impl Field {
         }
         out
     }
+}
+
+/// The field at one state ([`Field::local`]): (v̇, ω̇) [m/s², rad/s²], its Jacobian
+/// ∂(v̇, ω̇)/∂(v, ω) (rows v̇, ω̇) and the clamp's ∂(clamped − unclamped effort)/∂u.
+struct Local {
+    f: [f64; 2],
+    a: [[f64; 2]; 2],
+    ju: [[f64; 2]; 2],
 }
 
 /// The per-wheel efforts' correction of eq. 2.19's efforts E = (E_v, E_ω)
@@ -524,22 +556,10 @@ impl Extended {
         initial: &[f64],
     ) -> Result<[Vec<f64>; N]> {
         let sens = M > 0;
-        let &[v0, w0] = initial else {
-            return Err(Error::InvalidSetting(format!(
-                "initial state must be [v, ω], got {} values",
-                initial.len()
-            )));
-        };
-        let extra: Vec<f64> = ph.payload.map(|(t, _)| t).into_iter().collect();
-        let (grid, index) = merged_grid(rec, ph.delay, &extra)?;
-        let th_after = ph
-            .payload
-            .map(|(_, a)| [a[0], a[1], a[2], th0[3], a[3], th0[5]]);
-        let zoh = rec.command_hold() == CommandHold::Zoh;
-        let avg = rec.velocity_sampling() == VelocitySampling::WindowAverage;
-        let t0 = rec.t[0];
+        let run = Run::new(self.track, th0, ph, rec, initial)?;
+        let (v0, w0, hold, pipe, grid) = (run.v0, run.w0, run.hold, &run.pipe, &run.grid);
+        let t0 = pipe.t0;
         // The command that holds the initial state, and its sensitivity to (θ, x0).
-        let hold = holding_command(th0, initial);
         let dhold = hold_sensitivity::<M>(th0, v0, w0);
         let mut cursor = CommandCursor::new(rec, hold);
         // The recorded command at τ (the holding one before the record).
@@ -551,15 +571,10 @@ impl Extended {
                 Cmd::at([c.0, c.1], [[0.0; M]; 2], false)
             }
         };
-        let pipe = Setpoints {
-            ph,
-            track: self.track,
-            t0,
-        };
         // θ with the reciprocals of θ1, θ2 and its integration sub-step, before and after a
         // payload change: a step multiplies instead of dividing.
         let prepare = |th: [f64; 6], after: bool| (th, [1.0 / th[0], 1.0 / th[1]], after);
-        let (before, after) = (prepare(*th0, false), th_after.map(|a| prepare(a, true)));
+        let (before, after) = (prepare(*th0, false), run.th_after.map(|a| prepare(a, true)));
         let field = Field::new(forces, self.track, ph);
         // The rate-limited setpoint starts where it holds the initial state (a robot at rest
         // holds zero), as the simulator's.
@@ -568,7 +583,7 @@ impl Extended {
         } else {
             pipe.target(command(t0 - ph.delay))
         };
-        let fixed_setpoint = zoh && ph.accel.is_none() && ph.drift == 0.0;
+        let fixed_setpoint = run.zoh && ph.accel.is_none() && ph.drift == 0.0;
         let m = grid.len();
         // (v0, ω0); the θ columns start at 0, ∂(v, ω)/∂(v0, ω0) at I (columns 6, 7 where this
         // pass holds them).
@@ -588,12 +603,8 @@ impl Extended {
         for i in 1..m {
             let (ta, tb) = (grid[i - 1], grid[i]);
             let span = tb - ta;
-            let (th, inv, changed) = match (ph.payload, after) {
-                (Some((ts, _)), Some(a)) if 0.5 * (ta + tb) >= ts => a,
-                _ => before,
-            };
-            let ca = command(if zoh { 0.5 * (ta + tb) } else { ta } - ph.delay);
-            let cb = if zoh { ca } else { command(tb - ph.delay) };
+            let (th, inv, changed) = run.in_force(ta, tb, before, after);
+            let (ca, cb) = run.commands(ta, tb, &mut command);
             let rhs_at = |x: &[f64; N], c: Cmd<M>| field.rhs(&th, &inv, changed, x, &c);
             let plan = dynamics::plan(&th, span);
             let q = if fixed_setpoint {
@@ -604,22 +615,14 @@ impl Extended {
             } else {
                 step_interval(rhs_at, &plan, &mut z, |sub| {
                     let dynamics::Substep { f0, f1, h, t0, t1 } = sub;
-                    let s0 = setpoint;
-                    let s1 = pipe.slew(s0, pipe.target(ca.lerp(&cb, f1)), h);
-                    let s_start = if ph.accel.is_some() {
-                        s0
-                    } else {
-                        pipe.target(ca.lerp(&cb, f0))
-                    };
-                    setpoint = s1;
-                    (pipe.shaped(&s_start, ta + t0), pipe.shaped(&s1, ta + t1))
+                    pipe.substep(&mut setpoint, (ca, cb), (f0, f1), h, (ta + t0, ta + t1))
                 })
             };
             for (c, yc) in y.iter_mut().enumerate() {
-                yc.push(if avg { q[c] / span } else { z[c] });
+                yc.push(if run.avg { q[c] / span } else { z[c] });
             }
         }
-        Ok(to_samples(&y, &grid, &index, avg))
+        Ok(to_samples(&y, grid, &run.index, run.avg))
     }
 }
 
@@ -664,6 +667,83 @@ fn hold_sensitivity<const M: usize>(th0: &[f64; 6], v0: f64, w0: f64) -> [[f64; 
         }
     }
     dhold
+}
+
+/// What every integration of the module doc shares ([`Extended::integrate`] and the traction
+/// stage's): the initial state (v0 [m/s], ω0 [rad/s]), the recording's grid merged with the
+/// delayed command instants and a payload change (`index`: each sample's grid point), θ after
+/// the change, the recording's conventions, the holding command and the setpoint pipeline.
+struct Run<'a> {
+    v0: f64,
+    w0: f64,
+    grid: Vec<f64>,
+    index: Vec<usize>,
+    th_after: Option<[f64; 6]>,
+    /// Commands held over each sample interval (else interpolated).
+    zoh: bool,
+    /// Velocities are window averages (else instants).
+    avg: bool,
+    /// The command that holds the initial state.
+    hold: (f64, f64),
+    pipe: Setpoints<'a>,
+}
+
+impl<'a> Run<'a> {
+    /// The run of θ = `th0` under the effects `ph` on `rec` from `initial` = [v0, ω0].
+    ///
+    /// # Errors
+    /// An initial state of another length; a bad grid (`crate::delay::merged_grid`).
+    fn new(
+        track: f64,
+        th0: &[f64; 6],
+        ph: &'a Terms,
+        rec: &Recording,
+        initial: &[f64],
+    ) -> Result<Self> {
+        let &[v0, w0] = initial else {
+            return Err(Error::InvalidSetting(format!(
+                "initial state must be [v, ω], got {} values",
+                initial.len()
+            )));
+        };
+        let extra: Vec<f64> = ph.payload.map(|(t, _)| t).into_iter().collect();
+        let (grid, index) = merged_grid(rec, ph.delay, &extra)?;
+        Ok(Self {
+            v0,
+            w0,
+            grid,
+            index,
+            th_after: ph
+                .payload
+                .map(|(_, a)| [a[0], a[1], a[2], th0[3], a[3], th0[5]]),
+            zoh: rec.command_hold() == CommandHold::Zoh,
+            avg: rec.velocity_sampling() == VelocitySampling::WindowAverage,
+            hold: holding_command(th0, initial),
+            pipe: Setpoints {
+                ph,
+                track,
+                t0: rec.t[0],
+            },
+        })
+    }
+
+    /// What is in force over the grid interval (`ta`, `tb`): `after` once a payload change has
+    /// happened by its middle, else `before`.
+    fn in_force<T: Copy>(&self, ta: f64, tb: f64, before: T, after: Option<T>) -> T {
+        match (self.pipe.ph.payload, after) {
+            (Some((ts, _)), Some(a)) if 0.5 * (ta + tb) >= ts => a,
+            _ => before,
+        }
+    }
+
+    /// The delayed recorded commands at the interval's start and end (`command`: the command
+    /// at an instant [s]); one, at the middle, when commands are held.
+    fn commands<C: Copy>(&self, ta: f64, tb: f64, command: &mut impl FnMut(f64) -> C) -> (C, C) {
+        let delay = self.pipe.ph.delay;
+        let ca = command(if self.zoh { 0.5 * (ta + tb) } else { ta } - delay);
+        let cb = if self.zoh { ca } else { command(tb - delay) };
+        (ca, cb)
+    }
 }
 
 /// The setpoint pipeline after the delay: saturation → rate limit (a state) → asymmetry →
@@ -723,6 +803,29 @@ impl Setpoints<'_> {
         }
         let g = 1.0 + ph.drift * (t - self.t0);
         [uv * g, uw * g]
+    }
+
+    /// The commands at a sub-step's start and end, at fractions `f0`, `f1` of the way from the
+    /// interval's delayed commands `ca` to `cb` and at the instants `t` [s], over `h` [s]:
+    /// the target, the rate limit from the `setpoint` it holds (moved to the end's), then the
+    /// shaping (without a rate limit the start is the target itself).
+    fn substep<const M: usize>(
+        &self,
+        setpoint: &mut Cmd<M>,
+        (ca, cb): (Cmd<M>, Cmd<M>),
+        (f0, f1): (f64, f64),
+        h: f64,
+        t: (f64, f64),
+    ) -> (Cmd<M>, Cmd<M>) {
+        let s0 = *setpoint;
+        let s1 = self.slew(s0, self.target(ca.lerp(&cb, f1)), h);
+        let s_start = if self.ph.accel.is_some() {
+            s0
+        } else {
+            self.target(ca.lerp(&cb, f0))
+        };
+        *setpoint = s1;
+        (self.shaped(&s_start, t.0), self.shaped(&s1, t.1))
     }
 
     /// [`Setpoints::shape`] of a command and of its live sensitivities, with the drive gain.

@@ -15,15 +15,14 @@
 //! ```
 //!
 //! The grip is stiff (rate ≈ c/s0 × the contact's inverse inertia, ≈ 1/(0.02 ε τ)): an
-//! L-stable Rosenbrock method on equal sub-steps of τ/20 ([`ros2_step`]). Outputs are the wheels' speeds,
-//! instants or window averages as the recording says.
+//! L-stable Rosenbrock method on equal sub-steps of τ/40 ([`ros2_step`]), its Jacobian exact at
+//! every step (the contact's by hand, the field's from [`Field::local`]: a Jacobian held over
+//! a sample interval misses the grip's knee and moves the re-grip by ~0.3 s). Outputs are the
+//! wheels' speeds, instants or window averages as the recording says.
 
-use wheelid_core::{CommandHold, Recording, Result, TRACTION_SLIP_SHARE, Terms, Traction};
+use wheelid_core::{Recording, Result, TRACTION_SLIP_SHARE, Terms, Traction};
 
-use super::{
-    Cmd, CommandCursor, Extended, Field, Forces, Setpoints, holding_command, merged_grid,
-    to_samples,
-};
+use super::{Cmd, CommandCursor, Extended, Field, Forces, Local, Run, to_samples};
 use crate::dynamics;
 
 /// Sub-steps per shortest time constant min(θ1/θ4, θ2/θ6) ([`ros2_step`] is L-stable: the
@@ -32,28 +31,19 @@ const STEPS_PER_TAU: f64 = 40.0;
 
 /// One step of Verwer's two-stage Rosenbrock method ROS2 (γ = 1 + 1/√2; 2nd order,
 /// L-stable; Verwer, Spee, Blom & Hundsdorfer, SIAM J. Sci. Comput. 20 (1999) 1456) on
-/// ż = f(z, u) from `u0` to `u1` over `h`, the Jacobian ∂f/∂z by forward differences at the
-/// step's start; adds the trapezoidal ∫z over the step to `q`.
+/// ż = f(z, u) over `h`, ending under `u1`, given f and its Jacobian ∂f/∂z at the step's start
+/// (`start`); adds the trapezoidal ∫z over the step to `q`.
 fn ros2_step<U>(
     f: impl Fn(&[f64; 4], &U) -> [f64; 4],
+    start: ([f64; 4], nalgebra::Matrix4<f64>),
     z: &mut [f64; 4],
     q: &mut [f64; 4],
-    u0: &U,
     u1: &U,
     h: f64,
 ) {
     const GAMMA: f64 = 1.0 + std::f64::consts::FRAC_1_SQRT_2;
-    let f0 = f(z, u0);
-    let mut w = nalgebra::Matrix4::<f64>::identity();
-    for j in 0..4 {
-        let d = 1e-7 * (1.0 + z[j].abs());
-        let mut zj = *z;
-        zj[j] += d;
-        let fj = f(&zj, u0);
-        for i in 0..4 {
-            w[(i, j)] -= GAMMA * h * (fj[i] - f0[i]) / d;
-        }
-    }
+    let (f0, jac) = start;
+    let w = nalgebra::Matrix4::<f64>::identity() - GAMMA * h * jac;
     let Some(lu) = Some(w.lu()).filter(|lu| lu.is_invertible()) else {
         z.iter_mut().for_each(|x| *x = f64::NAN);
         return;
@@ -102,24 +92,54 @@ impl Contact {
         }
     }
 
-    /// ż for z = (v_b, ω_b, s_R, s_L), given f(v_w, ω_w) (eq. 2.19's right-hand side divided by
-    /// θ1, θ2, as [`Field::rhs`] gives it).
+    /// ż for z = (v_b, ω_b, s_R, s_L), given the field at the wheels' speeds (eq. 2.19's
+    /// right-hand side divided by θ1, θ2, as [`Field::local`] gives it) and, with `jac`, the
+    /// Jacobian ∂ż/∂z (the contact's exactly, the field's from its own; zeros without `jac`).
     #[inline(always)]
-    fn rhs(&self, th: &[f64; 6], z: &[f64; 4], f: impl Fn(f64, f64) -> [f64; 2]) -> [f64; 4] {
+    fn rhs(
+        &self,
+        th: &[f64; 6],
+        z: &[f64; 4],
+        field: impl Fn((f64, f64), bool) -> Local,
+        jac: bool,
+    ) -> ([f64; 4], nalgebra::Matrix4<f64>) {
         let [vb, wb, sr, sl] = *z;
-        let (vw, ww) = (vb + 0.5 * (sr + sl), wb + (sr - sl) / (2.0 * self.half));
-        let fa = f(vw, ww);
-        let (dv, dw) = (fa[0] * th[0], fa[1] * th[1]);
-        let (tr, tl) = (
-            self.c * (sr / self.s0).tanh(),
-            self.c * (sl / self.s0).tanh(),
-        );
+        let hd = 2.0 * self.half;
+        let (vw, ww) = (vb + 0.5 * (sr + sl), wb + (sr - sl) / hd);
+        let local = field((vw, ww), jac);
+        let (dv, dw) = (local.f[0] * th[0], local.f[1] * th[1]);
+        let (gr, gl) = ((sr / self.s0).tanh(), (sl / self.s0).tanh());
+        let (tr, tl) = (self.c * gr, self.c * gl);
         let (tv, tw) = (0.5 * (tr + tl), (tr - tl) / (2.0 * self.kappa));
         let e = self.eps;
-        let (vb_dot, wb_dot) = (tv / ((1.0 - e) * th[0]), tw / ((1.0 - e) * th[1]));
-        let (vw_dot, ww_dot) = ((dv - tv) / (e * th[0]), (dw - tw) / (e * th[1]));
+        let (mb_v, mb_w) = (1.0 / ((1.0 - e) * th[0]), 1.0 / ((1.0 - e) * th[1]));
+        let (mw_v, mw_w) = (1.0 / (e * th[0]), 1.0 / (e * th[1]));
+        let (vb_dot, wb_dot) = (tv * mb_v, tw * mb_w);
+        let (vw_dot, ww_dot) = ((dv - tv) * mw_v, (dw - tw) * mw_w);
         let (rv, rw) = (vw_dot - vb_dot, self.half * (ww_dot - wb_dot));
-        [vb_dot, wb_dot, rv + rw, rv - rw]
+        let zdot = [vb_dot, wb_dot, rv + rw, rv - rw];
+        let mut j = nalgebra::Matrix4::zeros();
+        if jac {
+            type Row = nalgebra::RowVector4<f64>;
+            let d_vw = Row::new(1.0, 0.0, 0.5, 0.5);
+            let d_ww = Row::new(0.0, 1.0, 1.0 / hd, -1.0 / hd);
+            let a = local.a;
+            let d_dv = th[0] * (a[0][0] * d_vw + a[0][1] * d_ww);
+            let d_dw = th[1] * (a[1][0] * d_vw + a[1][1] * d_ww);
+            let slope = |g: f64| self.c * (1.0 - g * g) / self.s0;
+            let (sr_, sl_) = (slope(gr), slope(gl));
+            let d_tv = Row::new(0.0, 0.0, 0.5 * sr_, 0.5 * sl_);
+            let d_tw = Row::new(0.0, 0.0, sr_, -sl_) / (2.0 * self.kappa);
+            let d_vb = d_tv * mb_v;
+            let d_wb = d_tw * mb_w;
+            let d_rv = (d_dv - d_tv) * mw_v - d_vb;
+            let d_rw = self.half * ((d_dw - d_tw) * mw_w - d_wb);
+            j.set_row(0, &d_vb);
+            j.set_row(1, &d_wb);
+            j.set_row(2, &(d_rv + d_rw));
+            j.set_row(3, &(d_rv - d_rw));
+        }
+        (zdot, j)
     }
 
     /// The wheels' speeds (v_w, ω_w) of state (or state integral) `z`.
@@ -146,85 +166,52 @@ impl Extended {
         initial: &[f64],
         tr: &Traction,
     ) -> Result<[Vec<f64>; 2]> {
-        let &[v0, w0] = initial else {
-            return Err(wheelid_core::Error::InvalidSetting(format!(
-                "initial state must be [v, ω], got {} values",
-                initial.len()
-            )));
-        };
-        let extra: Vec<f64> = ph.payload.map(|(t, _)| t).into_iter().collect();
-        let (grid, index) = merged_grid(rec, ph.delay, &extra)?;
-        let th_after = ph
-            .payload
-            .map(|(_, a)| [a[0], a[1], a[2], th0[3], a[3], th0[5]]);
-        let zoh = rec.command_hold() == CommandHold::Zoh;
-        let avg = rec.velocity_sampling() == wheelid_core::VelocitySampling::WindowAverage;
-        let t0 = rec.t[0];
-        let hold = holding_command(th0, initial);
+        let run = Run::new(self.track, th0, ph, rec, initial)?;
+        let (v0, w0, hold, pipe) = (run.v0, run.w0, run.hold, &run.pipe);
         let mut cursor = CommandCursor::new(rec, hold);
         let mut command = |tau: f64| {
             let c = cursor.at(tau);
             Cmd::<0>::at([c.0, c.1], [[]; 2], false)
         };
-        let pipe = Setpoints {
-            ph,
-            track: self.track,
-            t0,
-        };
         let field = Field::new(forces, self.track, ph);
-        let prepare = |th: [f64; 6], after: bool| {
+        let prepare = |th: [f64; 6]| {
             let contact = Contact::new(tr, &th, self.track);
             let tau = (th[0] / th[3]).abs().min((th[1] / th[5]).abs());
             let h = (tau / STEPS_PER_TAU).min(dynamics::substep(&th));
-            (th, [1.0 / th[0], 1.0 / th[1]], after, contact, h)
+            (th, [1.0 / th[0], 1.0 / th[1]], contact, h)
         };
-        let (before, after) = (prepare(*th0, false), th_after.map(|a| prepare(a, true)));
+        let (before, after) = (prepare(*th0), run.th_after.map(prepare));
         let mut setpoint = if ph.accel.is_some() {
             Cmd::at([hold.0, hold.1], [[]; 2], false)
         } else {
-            pipe.target(command(t0 - ph.delay))
+            pipe.target(command(pipe.t0 - ph.delay))
         };
         let mut z = [v0, w0, 0.0, 0.0];
         let mut y: [Vec<f64>; 2] = [vec![v0], vec![w0]];
-        for i in 1..grid.len() {
-            let (ta, tb) = (grid[i - 1], grid[i]);
+        for i in 1..run.grid.len() {
+            let (ta, tb) = (run.grid[i - 1], run.grid[i]);
             let span = tb - ta;
-            let (th, inv, changed, contact, h_max) = match (ph.payload, after) {
-                (Some((ts, _)), Some(a)) if 0.5 * (ta + tb) >= ts => a,
-                _ => before,
-            };
-            let ca = command(if zoh { 0.5 * (ta + tb) } else { ta } - ph.delay);
-            let cb = if zoh { ca } else { command(tb - ph.delay) };
+            let (th, inv, contact, h_max) = run.in_force(ta, tb, before, after);
+            let (ca, cb) = run.commands(ta, tb, &mut command);
             let n = (span / h_max).ceil().max(1.0) as usize;
             let h = span / n as f64;
             let mut q = [0.0; 4];
             for k in 0..n {
                 let (f0, f1) = (k as f64 / n as f64, (k + 1) as f64 / n as f64);
-                let s0 = setpoint;
-                let s1 = pipe.slew(s0, pipe.target(ca.lerp(&cb, f1)), h);
-                let s_start = if ph.accel.is_some() {
-                    s0
-                } else {
-                    pipe.target(ca.lerp(&cb, f0))
+                let times = (ta + f0 * span, ta + f1 * span);
+                let (u0, u1) = pipe.substep(&mut setpoint, (ca, cb), (f0, f1), h, times);
+                let rhs = |x: &[f64; 4], c: &Cmd<0>, jac: bool| {
+                    contact.rhs(&th, x, |vw, jac| field.local(&th, &inv, vw, c, jac), jac)
                 };
-                setpoint = s1;
-                let (u0, u1) = (
-                    pipe.shaped(&s_start, ta + f0 * span),
-                    pipe.shaped(&s1, ta + f1 * span),
-                );
-                let rhs = |x: &[f64; 4], c: &Cmd<0>| {
-                    contact.rhs(&th, x, |v, w| {
-                        field.rhs::<2, 0>(&th, &inv, changed, &[v, w], c)
-                    })
-                };
-                ros2_step(rhs, &mut z, &mut q, &u0, &u1, h);
+                let start = rhs(&z, &u0, true);
+                ros2_step(|x, c| rhs(x, c, false).0, start, &mut z, &mut q, &u1, h);
             }
             if z.iter().any(|x| !x.is_finite()) {
                 return Err(wheelid_core::Error::InvalidSetting(
                     "the traction model does not simulate (finitely)".into(),
                 ));
             }
-            let out = if avg {
+            let out = if run.avg {
                 contact.wheels(&q).map(|x| x / span)
             } else {
                 contact.wheels(&z)
@@ -232,7 +219,7 @@ impl Extended {
             y[0].push(out[0]);
             y[1].push(out[1]);
         }
-        Ok(to_samples(&y, &grid, &index, avg))
+        Ok(to_samples(&y, &run.grid, &run.index, run.avg))
     }
 }
 
@@ -314,6 +301,55 @@ mod tests {
             .map(|k| rec.t[k])
             .expect("the plateau ends");
         assert!(end > t_grip - 0.15 && end <= t_grip, "{end} vs {t_grip}");
+    }
+
+    /// ROS2's Jacobian ∂ż/∂z (the contact's by hand, the field's from [`Field::local`]) is the
+    /// right-hand side's central differences, in grip, on the grip's knee and in slip, with
+    /// dry friction and slip terms in the field.
+    #[test]
+    fn the_contacts_jacobian_is_its_differences() {
+        let ph = Terms {
+            coulomb: [0.02, 0.1],
+            slip: [0.1, 0.2],
+            ..Terms::default()
+        };
+        let field = Field::new(&Vec::new(), 0.33, &ph);
+        let th = [0.26, 0.25, 0.02, 1.0, 0.05, 1.0];
+        let tr = Traction {
+            accel_max: 0.5,
+            wheel_share: 0.15,
+            mix: 1.2,
+        };
+        let contact = Contact::new(&tr, &th, 0.33);
+        let inv = [1.0 / th[0], 1.0 / th[1]];
+        let c = Cmd::<0>::at([0.4, 0.3], [[]; 2], false);
+        let rhs = |z: &[f64; 4], jac| {
+            contact.rhs(&th, z, |vw, jac| field.local(&th, &inv, vw, &c, jac), jac)
+        };
+        let s0 = contact.s0;
+        for z in [
+            [0.3, 0.2, 0.1 * s0, -0.05 * s0],
+            [0.3, -0.2, 0.7 * s0, -1.3 * s0],
+            [-0.1, 0.4, 5.0 * s0, 0.2 * s0],
+        ] {
+            let (_, j) = rhs(&z, true);
+            let scale = j.amax();
+            for col in 0..4 {
+                let d = 1e-6 * s0;
+                let (mut up, mut down) = (z, z);
+                up[col] += d;
+                down[col] -= d;
+                let (fu, fd) = (rhs(&up, false).0, rhs(&down, false).0);
+                for row in 0..4 {
+                    let central = (fu[row] - fd[row]) / (2.0 * d);
+                    let err = (j[(row, col)] - central).abs();
+                    assert!(
+                        err <= 1e-6 * scale,
+                        "z {z:?} ({row}, {col}): {err} of {scale}"
+                    );
+                }
+            }
+        }
     }
 
     /// The traction stage has no sensitivity equations: every column comes by differences,
