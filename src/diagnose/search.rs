@@ -238,8 +238,19 @@ fn first_accepted(
     for (i, st) in ready {
         let c = round.nominees[i].pattern.candidate;
         if best.is_some() {
-            if more == MORE_FITS || st.cost > RIVAL_START_FACTOR * first_start {
+            if more == MORE_FITS {
                 break;
+            }
+            if st.cost > RIVAL_START_FACTOR * first_start {
+                rejected.push(Rejected {
+                    effect: c.name().into(),
+                    reason: format!(
+                        "not fitted: its screened start leaves {:.1}× the training cost of the \
+                         accepted candidate's (> {RIVAL_START_FACTOR})",
+                        st.cost / first_start
+                    ),
+                });
+                continue;
             }
             more += 1;
         }
