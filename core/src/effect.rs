@@ -359,6 +359,13 @@ pub trait Effect: Send + Sync + std::fmt::Debug {
     fn has_force(&self) -> bool {
         false
     }
+    /// Whether its stage has no sensitivity equations, so that a model with it has its
+    /// sensitivities by forward differences (one simulation per parameter and iteration, as
+    /// the traction stage, [`Terms::traction`]): diagnose fits it only where its start is the
+    /// best of a round, never as a rival, and with a smaller iteration budget.
+    fn differenced(&self) -> bool {
+        false
+    }
     /// The force it adds at state (v [m/s], ω [rad/s]) with parameters `p` on a robot of wheel
     /// track `track` \[m\] (independent of θ); the default adds none.
     fn force(&self, _p: &[f64], _v: f64, _w: f64, _track: f64) -> Force {

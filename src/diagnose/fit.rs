@@ -281,6 +281,12 @@ fn weak_channel(
 /// An output-error fit of some parameters: the fit, the full θ, the free indices.
 pub(super) type PinnedFit = (OutputErrorFit, Vec<f64>, Vec<usize>);
 
+/// The fit budget (residual evaluations per unknown, the solver's `patience`) of a model with a
+/// stage fitted by differences ([`wheelid_core::Effect::differenced`]); 10 otherwise. The
+/// slippery-floor fits on tuning seeds converged within 24 evaluations of 12 unknowns; a
+/// traction limit fitted on a recording without slip crawls toward its null for 50 and more.
+const DIFFERENCED_PATIENCE: usize = 3;
+
 /// Fits `model` on the training blocks from `theta` with the `pinned` parameters held
 /// (`bounds` for the full θ).
 pub(super) fn fit_pinned(
@@ -291,10 +297,15 @@ pub(super) fn fit_pinned(
     bounds: &[(f64, f64)],
 ) -> std::result::Result<PinnedFit, String> {
     let restricted = Pinned::new(model, theta.to_vec(), pinned);
+    let differenced = model.candidates().iter().any(|c| c.effect().differenced());
     let oe = OutputError {
         bounds: Some(restricted.free.iter().map(|&i| bounds[i]).collect()),
         mask: Some(data.train.clone()),
-        patience: 10,
+        patience: if differenced {
+            DIFFERENCED_PATIENCE
+        } else {
+            10
+        },
         tolerance: 1e-5,
         forward_differences: true,
         ..OutputError::default()

@@ -241,13 +241,18 @@ fn first_accepted(
             if more == MORE_FITS {
                 break;
             }
-            if st.cost > RIVAL_START_FACTOR * first_start {
+            let ratio = st.cost / first_start;
+            if ratio > RIVAL_START_FACTOR || c.effect().differenced() {
+                let why = if ratio > RIVAL_START_FACTOR {
+                    format!("(> {RIVAL_START_FACTOR})")
+                } else {
+                    "(a model fitted by differences is fitted only where it starts best)".into()
+                };
                 rejected.push(Rejected {
                     effect: c.name().into(),
                     reason: format!(
-                        "not fitted: its screened start leaves {:.1}× the training cost of the \
-                         accepted candidate's (> {RIVAL_START_FACTOR})",
-                        st.cost / first_start
+                        "not fitted: its screened start leaves {ratio:.1}× the training cost of \
+                         the accepted candidate's {why}"
                     ),
                 });
                 continue;
@@ -293,7 +298,8 @@ const MORE_FITS: usize = 2;
 /// A rival is fitted after the first accepted candidate only if its screened start's training
 /// cost is within this factor of the accepted one's start ([`first_accepted`]): a start that
 /// explains several times less of the residual does not come back to win on the validation
-/// blocks, and an expensive model (the traction stage) is not fitted for nothing.
+/// blocks. A candidate fitted by differences ([`wheelid_core::Effect::differenced`]) is never a
+/// rival: one fit of it costs as much as all the others' together.
 const RIVAL_START_FACTOR: f64 = 3.0;
 
 /// The free parameters candidate `c` adds in `new` (the last of its candidates).
