@@ -40,8 +40,9 @@
 //!    is the main guard; not asked once every channel's validation fit is at least
 //!    [`PRACTICAL_FIT_PERCENT`], where the scale-free statistic keeps its size on a residual a
 //!    hundred times smaller). The first candidate that passes and up to two more (those
-//!    whose screened start's training cost is within three times the first's) compete on
-//!    Akaike's criterion over the validation blocks, n_eff ln(J₁/J₀) + 2k, n_eff discounted for
+//!    whose screened start's training cost is within three times the first's; never a
+//!    candidate fitted by differences, which is fitted only where its start already lowers the
+//!    training cost by `min_improvement`) compete on Akaike's criterion over the validation blocks, n_eff ln(J₁/J₀) + 2k, n_eff discounted for
 //!    the residual's lag-1 autocorrelation. Then the search starts again from the extended
 //!    model (forward selection, at most [`DiagnoseSettings::max_effects`], until every channel
 //!    is practically fitted). What stays significant or above the noise floor in a channel
