@@ -238,40 +238,18 @@ fn first_accepted(
     let now = data.frame().residuals(&cur.sim).norm_squared();
     for (i, st) in ready {
         let c = round.nominees[i].pattern.candidate;
-        let gain = 1.0 - st.cost / now;
-        if c.effect().differenced() && !(gain >= settings.min_improvement) {
+        if best.is_some() && more == MORE_FITS {
+            break;
+        }
+        let accepted = best.is_some().then_some(first_start);
+        if let Some(reason) = not_fitted(c, st.cost, now, accepted, settings) {
             rejected.push(Rejected {
                 effect: c.name().into(),
-                reason: format!(
-                    "not fitted: its screened start changes the training cost by {:+.1} % (a \
-                     model fitted by differences is fitted where its start already lowers it by \
-                     {:.0} %)",
-                    -100.0 * gain,
-                    100.0 * settings.min_improvement
-                ),
+                reason,
             });
             continue;
         }
         if best.is_some() {
-            if more == MORE_FITS {
-                break;
-            }
-            let ratio = st.cost / first_start;
-            if ratio > RIVAL_START_FACTOR || c.effect().differenced() {
-                let why = if ratio > RIVAL_START_FACTOR {
-                    format!("(> {RIVAL_START_FACTOR})")
-                } else {
-                    "(a model fitted by differences is fitted only where it starts best)".into()
-                };
-                rejected.push(Rejected {
-                    effect: c.name().into(),
-                    reason: format!(
-                        "not fitted: its screened start leaves {ratio:.1}× the training cost of \
-                         the accepted candidate's {why}"
-                    ),
-                });
-                continue;
-            }
             more += 1;
         }
         let start_cost = st.cost;
@@ -338,6 +316,41 @@ fn outscored(c: Candidate, score: f64, winner: &Accepted, best: f64) -> Rejected
             100.0 * winner.3
         ),
     }
+}
+
+/// Why candidate `c`, whose screened start's training cost is `start` (the current model's:
+/// `now`), is not fitted in this round, if it is not: a model fitted by differences whose
+/// start does not already lower the cost by `min_improvement`, or a rival (the first accepted
+/// candidate's start cost `accepted`) outside [`RIVAL_START_FACTOR`] or fitted by differences.
+fn not_fitted(
+    c: Candidate,
+    start: f64,
+    now: f64,
+    accepted: Option<f64>,
+    settings: &DiagnoseSettings,
+) -> Option<String> {
+    let differenced = c.effect().differenced();
+    let gain = 1.0 - start / now;
+    if differenced && (gain.is_nan() || gain < settings.min_improvement) {
+        return Some(format!(
+            "not fitted: its screened start changes the training cost by {:+.1} % (a model \
+             fitted by differences is fitted where its start already lowers it by {:.0} %)",
+            -100.0 * gain,
+            100.0 * settings.min_improvement
+        ));
+    }
+    let ratio = start / accepted?;
+    let why = if ratio > RIVAL_START_FACTOR {
+        format!("(> {RIVAL_START_FACTOR})")
+    } else if differenced {
+        "(a model fitted by differences is fitted only where it starts best)".into()
+    } else {
+        return None;
+    };
+    Some(format!(
+        "not fitted: its screened start leaves {ratio:.1}× the training cost of the accepted \
+         candidate's {why}"
+    ))
 }
 
 /// Most fits continued along a fingerprint that stays ([`Refusal::continue_from`]).
@@ -519,4 +532,30 @@ pub(super) fn run(
     }
     out.cur = cur;
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The fit budget's rules on closed-form costs: a model fitted by differences needs a
+    /// start 5 % better than the current model's and is never a rival; any rival needs a start
+    /// within 3× the first accepted one's.
+    #[test]
+    fn who_is_not_fitted() {
+        let s = DiagnoseSettings::default();
+        let (traction, delay) = (Candidate::TRACTION_LIMIT, Candidate::INPUT_DELAY);
+        // First of the round: only the differenced one's own gain counts.
+        assert!(not_fitted(traction, 96.0, 100.0, None, &s).is_some());
+        assert!(not_fitted(traction, 350.0, 100.0, None, &s).is_some());
+        assert!(not_fitted(traction, 94.0, 100.0, None, &s).is_none());
+        assert!(not_fitted(delay, 350.0, 100.0, None, &s).is_none());
+        // Rivals of a candidate accepted from a start of 20.
+        assert!(not_fitted(delay, 59.0, 100.0, Some(20.0), &s).is_none());
+        let far = not_fitted(delay, 70.0, 100.0, Some(20.0), &s).expect("outside 3×");
+        assert!(far.contains("3.5×"), "{far}");
+        assert!(not_fitted(traction, 21.0, 100.0, Some(20.0), &s).is_some());
+        // A NaN start cost is no gain.
+        assert!(not_fitted(traction, f64::NAN, 100.0, None, &s).is_some());
+    }
 }
