@@ -361,8 +361,9 @@ pub trait Effect: Send + Sync + std::fmt::Debug {
     }
     /// Whether its stage has no sensitivity equations, so that a model with it has its
     /// sensitivities by forward differences (one simulation per parameter and iteration, as
-    /// the traction stage, [`Terms::traction`]): diagnose fits it only where its start is the
-    /// best of a round, never as a rival, and with a smaller iteration budget.
+    /// the traction stage, [`Terms::traction`]): diagnose fits it only where its screened start
+    /// already lowers the training cost by its `min_improvement`, never as a rival, and with a
+    /// smaller iteration budget.
     fn differenced(&self) -> bool {
         false
     }

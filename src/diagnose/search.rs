@@ -343,7 +343,7 @@ fn not_fitted(
     let why = if ratio > RIVAL_START_FACTOR {
         format!("(> {RIVAL_START_FACTOR})")
     } else if differenced {
-        "(a model fitted by differences is fitted only where it starts best)".into()
+        "(a model fitted by differences is never a rival)".into()
     } else {
         return None;
     };

@@ -235,9 +235,9 @@ impl Field {
         }
     }
 
-    /// (v̇, ω̇) at (v, ω) under command `c` (θ with the reciprocals `inv` of θ1, θ2) and, with
-    /// `jac`, its Jacobian ∂(v̇, ω̇)/∂(v, ω) and the clamp's ∂(clamped − unclamped effort)/∂u
-    /// (zeros without `jac`).
+    /// (v̇, ω̇) at (v, ω) under command `c` (θ with the reciprocals `inv` of θ1, θ2), the clamp's
+    /// ∂(clamped − unclamped effort)/∂u and, with `jac`, the Jacobian ∂(v̇, ω̇)/∂(v, ω) (zeros
+    /// without `jac`).
     #[inline(always)]
     fn local<const M: usize>(
         &self,
