@@ -207,6 +207,8 @@ pub struct Record {
     pub named: Vec<String>,
     /// Their fitted parameters.
     pub named_params: BTreeMap<String, BTreeMap<String, f64>>,
+    /// Their standard errors (a change time: the half width of its interval).
+    pub named_std_err: BTreeMap<String, BTreeMap<String, f64>>,
     /// Whether a mismatch was declared.
     pub mismatch: bool,
     /// Channels of the unexplained structure, if any.
@@ -732,6 +734,7 @@ pub fn run_one(spec: &RunSpec, cache: &CleanRuns) -> Record {
         truth_params: BTreeMap::new(),
         named: Vec::new(),
         named_params: BTreeMap::new(),
+        named_std_err: BTreeMap::new(),
         mismatch: false,
         unexplained: None,
         exactly_right: false,
@@ -813,6 +816,11 @@ fn run_into(spec: &RunSpec, cache: &CleanRuns, rec: &mut Record) -> Result<()> {
         .findings
         .iter()
         .map(|f| (f.effect.clone(), f.parameters.clone()))
+        .collect();
+    rec.named_std_err = d
+        .findings
+        .iter()
+        .map(|f| (f.effect.clone(), f.std_err.clone()))
         .collect();
     rec.mismatch = d.mismatch;
     rec.unexplained = d.unexplained.as_ref().map(|u| u.channels.clone());

@@ -144,3 +144,49 @@ fn a_pioneer_on_a_slippery_floor_is_named_traction_limit() {
         "a_max {a} vs μ g (1 − b/x_c) {limit}"
     );
 }
+
+/// Tuning seed 4 of the harness, the Pioneer-like robot with a payload set down at 44.8 s, in
+/// the validation block 24–48 s (window-middle stamps). The training blocks cannot place a change
+/// inside a validation block: the training cost is flat across it but for a transient that
+/// reaches the next training block and lowers it by ~10⁻⁴, so a fixed 10⁻⁶ flatness put the
+/// change at the block's end, the validation samples between the true time and that guess
+/// judged a wrong model, and the validation cost rose by ~50 % (nothing named, `unexplained`;
+/// 5 of 6 payload misses on hold-out seeds 1011–1012). Now the change time's interval is its
+/// profile likelihood's, the payload is named, the validation samples inside the interval are
+/// not judged, and the true time lies inside it.
+#[test]
+fn a_pioneer_payload_set_down_in_a_validation_block_is_named() {
+    let spec = RunSpec {
+        profile: "pioneer3dx".into(),
+        timing: Timing::WindowMiddle,
+        effects: vec!["payload"],
+        seed: 4,
+        duration_s: 120.0,
+        jitter: 0.0,
+        candidates: None,
+        cache: None,
+    };
+    let recs = run_all(std::slice::from_ref(&spec), 1, &|_, _| {});
+    let r = &recs[0];
+    eprintln!(
+        "named {:?} {:?}, unexplained {:?}, fit v {:.1}→{:.1} ω {:.1}→{:.1}, truth {:?}",
+        r.named,
+        r.named_params,
+        r.unexplained,
+        r.fit_nominal.v,
+        r.fit_final.v,
+        r.fit_nominal.w,
+        r.fit_final.w,
+        r.truth_params
+    );
+    assert!(r.error.is_none(), "{:?}", r.error);
+    assert_eq!(r.named, ["payload_change"]);
+    assert!(r.exactly_right);
+    let at = r.truth_params["payload"]["at_s"];
+    assert!((24.0..48.0).contains(&at), "the drop at {at} s");
+    let p = &r.named_params["payload_change"];
+    let (t, half) = (p["time_s"], r.named_std_err["payload_change"]["time_s"]);
+    assert!((t - at).abs() <= half, "{t} ± {half} vs {at}");
+    let theta1 = r.truth_params["payload"]["theta1_loaded_map"];
+    assert!((p["theta1_after"] - theta1).abs() <= 0.2 * theta1);
+}

@@ -84,8 +84,10 @@ pub(super) fn verdict(
     let (data, settings) = (cx.data, cx.settings);
     let n = &cx.nominees[i];
     let c = n.pattern.candidate;
-    let (before, cost_before) = data.validate(&cx.cur.sim);
-    let (after, cost) = data.validate(&new.sim);
+    // Both models on the same samples: outside either's unidentified intervals.
+    let judged = data.judged(&[cx.cur, &new]);
+    let (before, cost_before) = data.validate_on(&cx.cur.sim, &judged);
+    let (after, cost) = data.validate_on(&new.sim, &judged);
     let drop = 1.0 - cost / cost_before;
     if drop < settings.min_improvement {
         let change = if drop > 0.0 {

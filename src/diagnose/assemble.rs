@@ -104,20 +104,26 @@ fn unexplained(
 pub(super) fn assemble(
     data: &Data,
     settings: &DiagnoseSettings,
-    nominal: Stage,
+    mut nominal: Stage,
     location: Location,
     mut out: search::Outcome,
     nominal_sim: &Outputs,
     seconds: f64,
 ) -> Diagnosis {
     final_parameters(&mut out.findings, &out.cur);
+    // The final model is judged where it makes a claim (outside its unidentified intervals),
+    // and the nominal model alike.
+    let judged = data.judged(&[&out.cur]);
     let final_location = if out.findings.is_empty() {
         location.clone()
     } else {
         let max_lag = data.max_lag(settings);
-        locate::locate(&data.recs, &out.cur.sim, &data.valid, data.dt, max_lag)
+        locate::locate(&data.recs, &out.cur.sim, &judged, data.dt, max_lag)
     };
-    let final_stage = data.stage(&out.cur);
+    let final_stage = data.stage(&out.cur, &judged);
+    if judged != data.valid {
+        (nominal.channels, nominal.validation_cost) = data.validate_on(nominal_sim, &judged);
+    }
     let unexplained = unexplained(out.mismatch, &final_location, &final_stage, settings.alpha);
     let series = data
         .recs

@@ -134,6 +134,15 @@ pub(super) fn fit_candidate(
         // The change time's cost is flat between samples: its minimum's middle, refitted.
         let step = (t_hi - t_lo) / (nominee.pattern.grid + 1) as f64;
         let t0 = full[base];
+        // Times whose training cost the data cannot tell from the least: the profile
+        // likelihood's 95 % interval, n_eff ln(J(t)/J_min) ≤ χ²₁(0.95), n_eff the training
+        // rows discounted for the residual's autocorrelation. (A transient reaching into the
+        // next training block makes the cost fall by 10⁻⁴ at a validation block's end: a
+        // fixed 10⁻⁶ took that for the minimum and placed a change at 75.9 s at 93.8 s.)
+        let n_eff = simulate_all(&model, &full, &data.recs, &fit.initial)
+            .map_or(1.0, |y| data.effective_samples_on(&y, &data.train))
+            .max(1.0);
+        let tolerance = (CHI2_1_95 / n_eff).exp_m1();
         let (lo, hi) = flat_minimum(
             (-16..=16).map(|i| (t0 + step * i as f64 / 16.0).clamp(t_lo + margin, t_hi - margin)),
             |t| {
@@ -142,6 +151,7 @@ pub(super) fn fit_candidate(
                 simulate_all(&model, &th, &data.recs, &fit.initial)
                     .map_or(f64::INFINITY, |y| frame.residuals(&y).norm_squared())
             },
+            tolerance,
         );
         time_resolution = 0.5 * (hi - lo) + step / 32.0;
         if (0.5 * (lo + hi) - t0).abs() > 1e-9 {
@@ -229,10 +239,17 @@ fn shortened_lags(
     level_grid(&from, base, active, &training_cost)
 }
 
-/// The ends of the contiguous run of near-minimal costs around the least one, over the
-/// `times` (in order) with cost `cost`: the flat minimum of a change time, whose cost does not
-/// move while it sweeps a validation block.
-fn flat_minimum(times: impl Iterator<Item = f64>, cost: impl Fn(f64) -> f64) -> (f64, f64) {
+/// χ²₁ at 0.95: the profile-likelihood interval of one parameter.
+const CHI2_1_95: f64 = 3.841;
+
+/// The ends of the contiguous run of near-minimal costs around the least one (within a
+/// relative `tolerance`), over the `times` (in order) with cost `cost`: the flat minimum of a
+/// change time, whose cost barely moves while it sweeps a validation block.
+fn flat_minimum(
+    times: impl Iterator<Item = f64>,
+    cost: impl Fn(f64) -> f64,
+    tolerance: f64,
+) -> (f64, f64) {
     let scan: Vec<(f64, f64)> = times.map(|t| (t, cost(t))).collect();
     let (arg, least) =
         scan.iter().enumerate().fold(
@@ -241,7 +258,7 @@ fn flat_minimum(times: impl Iterator<Item = f64>, cost: impl Fn(f64) -> f64) -> 
                 if x.1 < a.1 { (i, x.1) } else { a }
             },
         );
-    let near = |i: usize| scan[i].1 <= least * (1.0 + 1e-6) + 1e-12;
+    let near = |i: usize| scan[i].1 <= least * (1.0 + tolerance) + 1e-12;
     let (mut a, mut b) = (arg, arg);
     while a > 0 && near(a - 1) {
         a -= 1;

@@ -26,7 +26,7 @@
 //!    strongest first — every effect of `wheelid_models::effects::EFFECTS` (`input_delay`,
 //!    `acceleration_limit`, `velocity_saturation`, `coulomb_friction`, `wheel_asymmetry`,
 //!    `payload_change`, `gain_drift`, `slip`, `wheel_friction`, `effort_clamp`,
-//!    `amp_asymmetry`). A two-channel candidate acts on the channels whose own pattern is
+//!    `amp_asymmetry`, `traction_limit`). A two-channel candidate acts on the channels whose own pattern is
 //!    significant; the other channel's parameter is held at its null;
 //! 5. **model and accept** — the extended model is fitted by output error; the candidate is
 //!    kept only if the validation cost Σ_c Σ_k e²/σ_c² drops by at least
@@ -42,8 +42,13 @@
 //!    hundred times smaller). The first candidate that passes and up to two more (those
 //!    whose screened start's training cost is within three times the first's; never a
 //!    candidate fitted by differences, which is fitted only where its start already lowers the
-//!    training cost by `min_improvement`) compete on Akaike's criterion over the validation blocks, n_eff ln(J₁/J₀) + 2k, n_eff discounted for
-//!    the residual's lag-1 autocorrelation. Then the search starts again from the extended
+//!    training cost by `min_improvement`) compete on Akaike's criterion over the validation
+//!    blocks, n_eff ln(J₁/J₀) + 2k, n_eff discounted for the residual's lag-1
+//!    autocorrelation. A change time (`payload_change`) is placed by a scan of the training
+//!    cost; its interval is the profile likelihood's 95 % one, n_eff ln(J(t)/J_min) ≤ χ²₁.
+//!    Where that interval spans validation samples the training blocks cannot place the
+//!    change inside it: every model compared with one that leaves such an interval open is
+//!    judged, as that one is, on the validation samples outside it. Then the search starts again from the extended
 //!    model (forward selection, at most [`DiagnoseSettings::max_effects`], until every channel
 //!    is practically fitted). What stays significant or above the noise floor in a channel
 //!    fitted below [`PRACTICAL_FIT_PERCENT`] once the noise floor is taken out of its residual
@@ -431,7 +436,7 @@ pub fn diagnose_observed(
         sim,
         jacobian: nominal_fit.jacobian.as_ref().map(|j| data.frame().weigh(j)),
     };
-    let nominal = data.stage(&cur);
+    let nominal = data.stage(&cur, &data.valid);
     progress.step("testing the residuals", 1);
     let max_lag = data.max_lag(settings);
     let location = locate::locate(&data.recs, &cur.sim, &data.valid, data.dt, max_lag);

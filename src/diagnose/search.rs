@@ -112,7 +112,7 @@ fn test_round(
 /// The channels whose validation residual is above the noise floor by more than
 /// [`NOISE_FLOOR_FACTOR`] while their fit is below [`PRACTICAL_FIT_PERCENT`].
 pub(super) fn above_floor(data: &Data, cur: &Current) -> [bool; 2] {
-    let (fits, _) = data.validate(&cur.sim);
+    let (fits, _) = data.validate_on(&cur.sim, &data.judged(&[cur]));
     [fits.v, fits.w].map(|c| {
         (c.fit_percent.is_nan() || c.fit_percent < PRACTICAL_FIT_PERCENT)
             && c.noise_ratio > NOISE_FLOOR_FACTOR
@@ -393,7 +393,7 @@ fn fit_and_judge(
 
 /// The finding for nominee `n` accepted into `new` (its parameters as fitted; the final
 /// model's values are filled in by the report).
-fn finding(n: &Nominee, new: &Current, after: &Channels, drop: f64) -> Finding {
+fn finding(data: &Data, n: &Nominee, new: &Current, after: &Channels, drop: f64) -> Finding {
     let c = n.pattern.candidate;
     let base = new.theta.len() - c.params().len();
     let mut parameters = BTreeMap::new();
@@ -412,12 +412,13 @@ fn finding(n: &Nominee, new: &Current, after: &Channels, drop: f64) -> Finding {
         parameters,
         std_err,
         evidence: format!(
-            "fingerprint χ²({}) = {:.1}, p = {:.1e}: {}; validation cost −{:.1} %",
+            "fingerprint χ²({}) = {:.1}, p = {:.1e}: {}; validation cost −{:.1} %{}",
             n.score.dof,
             n.score.stat,
             n.p_value,
             n.pattern.evidence,
-            100.0 * drop
+            100.0 * drop,
+            unjudged(data, new)
         ),
         fit_percent_after: BTreeMap::from([
             ("v".to_owned(), after.v.fit_percent),
@@ -425,6 +426,26 @@ fn finding(n: &Nominee, new: &Current, after: &Channels, drop: f64) -> Finding {
         ]),
         validation_cost_drop_percent: 100.0 * drop,
     }
+}
+
+/// What the validation leaves out for a model with a change time whose interval holds
+/// validation samples ([`Data::judged`]), for the evidence; empty otherwise.
+fn unjudged(data: &Data, new: &Current) -> String {
+    let judged = data.judged(&[new]);
+    let left = |m: &[Vec<bool>]| m.iter().flatten().filter(|&&b| b).count();
+    if left(&judged) == left(&data.valid) {
+        return String::new();
+    }
+    let spans: Vec<String> = data
+        .unidentified(new)
+        .iter()
+        .map(|(a, b)| format!("{a:.1}–{b:.1} s"))
+        .collect();
+    format!(
+        " (the training blocks place the change anywhere in {}: the validation samples \
+         there are not judged)",
+        spans.join(", ")
+    )
 }
 
 /// Backward step: an effect added before `added` that it makes redundant (without it the
@@ -440,12 +461,13 @@ fn backward_step(
     if cur.candidates.len() < 2 {
         return cur;
     }
-    let (_, cost_with) = data.validate(&cur.sim);
     for k in (0..cur.candidates.len() - 1).rev() {
         let Ok(without) = remove_candidate(data, &cur, k) else {
             continue;
         };
-        let (_, cost_without) = data.validate(&without.sim);
+        let judged = data.judged(&[&cur, &without]);
+        let (_, cost_with) = data.validate_on(&cur.sim, &judged);
+        let (_, cost_without) = data.validate_on(&without.sim, &judged);
         let rise = cost_without / cost_with - 1.0;
         if rise < min_improvement {
             let gone = cur.candidates[k];
@@ -494,14 +516,20 @@ pub(super) fn run(
         let here = if round_no == 0 {
             location.clone()
         } else {
-            locate::locate(&data.recs, &cur.sim, &data.valid, data.dt, max_lag)
+            locate::locate(
+                &data.recs,
+                &cur.sim,
+                &data.judged(&[&cur]),
+                data.dt,
+                max_lag,
+            )
         };
         let Some(round) = test_round(data, &cur, &pending, &here, settings.alpha) else {
             break;
         };
         // Evidence counts only where the model misses a practically relevant share of a
         // channel (a 99.9 % fit with structure at the 0.1 % level is kept), in every round.
-        let (fits, _) = data.validate(&cur.sim);
+        let (fits, _) = data.validate_on(&cur.sim, &data.judged(&[&cur]));
         let relevant = [fits.v.fit_percent, fits.w.fit_percent]
             .iter()
             .any(|f| f.is_nan() || *f < PRACTICAL_FIT_PERCENT);
@@ -519,7 +547,7 @@ pub(super) fn run(
             break;
         };
         let n = &round.nominees[i];
-        out.findings.push(finding(n, &new, &after, drop));
+        out.findings.push(finding(data, n, &new, &after, drop));
         tried.clear();
         cur = backward_step(
             data,
