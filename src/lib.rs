@@ -15,7 +15,7 @@
 //!   ([`report`]) and plots ([`plot`]); the stamping convention, stated or estimated
 //!   ([`timing`]); config-driven runs ([`run`]) and external plugins
 //!   ([`plugins`]); controller migration between robots ([`migrate`]); the ROS 2 hand-off
-//!   ([`export`]).
+//!   ([`export`]); online identification on board, one sample at a time ([`online`]).
 //!
 //! ```
 //! use wheelid::{identify::{identify, IdentifySettings}, models::VwPd, solvers::Ols};
@@ -36,6 +36,7 @@ pub mod files;
 pub mod identify;
 pub mod migrate;
 pub mod observer;
+pub mod online;
 pub mod plot;
 pub mod plugins;
 pub mod registry;

@@ -12,18 +12,24 @@
 //! * [`oe`]: output error — θ that makes any [`wheelid_core::DynamicModel`]'s free-run
 //!   simulation match the measurements (Levenberg–Marquardt, bounds, sandwich intervals);
 //! * [`iv`]: instrumental variables with instruments from the model's own noise-free
-//!   simulation, iterated — linear and fast.
+//!   simulation, iterated — linear and fast;
+//!
+//! and one online estimator:
+//! * [`recursive`]: recursive least squares with forgetting and a change detector — per
+//!   sample, no allocation.
 
 mod boxls;
 pub mod iv;
 pub mod oe;
 mod ols;
+pub mod recursive;
 
 pub use boxls::BoxLs;
 
 pub use iv::{InstrumentalVariables, IvFit};
 pub use oe::{OutputError, OutputErrorFit};
 pub use ols::Ols;
+pub use recursive::{ChangeDetection, Rls, RlsSettings, RlsUpdate};
 
 /// Names of the built-in solvers.
 pub const SOLVER_NAMES: [&str; 2] = ["ols", "box"];

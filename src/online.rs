@@ -1,0 +1,298 @@
+//! Online identification of θ1…θ6 (Laut 2011 eq. 2.19) on board, one sample at a time, by
+//! recursive least squares with forgetting and a change detector
+//! (`wheelid_solvers::recursive`) on prefiltered regressors.
+//!
+//! The batch pipeline filters forward and backward and differentiates numerically; neither
+//! runs causally, and a causal derivative of sampled data is biased when the period is not
+//! small against θ1 (the Khepera III: θ1 ≈ 26 ms at 20 ms). Each channel of eq. 2.19 is
+//! instead written exactly at the samples. The v channel, θ1 v̇ = v_ref − θ4 v + θ3 ω², with
+//! the command held over each period T and the coupling n = ω² taken as its trapezoidal mean
+//! n̄_k = (n_k + n_{k+1})/2 over it, gives
+//!
+//! ```text
+//! y_{k+1} = a y_k + β0 u_k + β1 u_{k−1} + c n̄_k,     a = e^{−θ4 T/θ1},
+//! β0 + β1 = (1 − a)/θ4,   c = θ3 (1 − a)/θ4
+//! ```
+//!
+//! with β1 = 0 for instantaneous velocities (timing convention (a)) and β1 ≠ 0 for velocities
+//! averaged over the period (conventions (b), (c): the average of an exponential over a held
+//! command; issue 7), so one regressor [y_k, u_k, u_{k−1}, n̄_k] serves every convention.
+//! The ω channel is the same with (θ2, θ6, −θ5) and n = v ω. Back to θ:
+//!
+//! ```text
+//! θ4 = (1 − a)/(β0 + β1),   θ1 = −θ4 T / ln a,   θ3 = c/(β0 + β1)
+//! ```
+//!
+//! (undefined, reported as NaN, until 0 < a < 1 and β0 + β1 > 0), with standard errors by the
+//! delta method from σ̂² P. Every signal first passes through the same causal low-pass
+//! L(q) = ((1 − p)/(1 − p q⁻¹))², p = e^{−2π f_c T}: a linear time-invariant filter leaves the
+//! difference equation as it is and weighs down the high band, where the measurement noise in
+//! the regressor y_k lives (it still biases θ: errors in variables; measured in the tests).
+
+use wheelid_core::{Error, Result};
+use wheelid_solvers::recursive::{ChangeDetection, Rls, RlsSettings};
+
+/// Settings of the online estimator.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct OnlineSettings {
+    /// f_c: the prefilter's corner \[Hz\]; `None`: p = 1/2, f_c = ln 2/(2π T) ≈ 0.11/T.
+    pub cutoff_hz: Option<f64>,
+    /// T_mem: the memory of the forgetting factor λ = 1 − T/T_mem \[s\].
+    pub memory_s: f64,
+    /// p_0: start and reset covariance of each channel's RLS.
+    pub initial_variance: f64,
+    /// The change detector (a payload put on or taken off): on an alarm the channel's
+    /// covariance is reset and θ re-converges as from a fresh start.
+    pub detection: Option<ChangeDetection>,
+    /// Seconds before a channel's detector arms (the estimate's first convergence) \[s\].
+    pub warmup_s: f64,
+}
+
+impl Default for OnlineSettings {
+    fn default() -> Self {
+        Self {
+            cutoff_hz: None,
+            memory_s: 60.0,
+            initial_variance: 1e4,
+            detection: Some(ChangeDetection::default()),
+            warmup_s: 10.0,
+        }
+    }
+}
+
+/// The signals: u and y of each channel, n (ω², v ω).
+const SIGNALS: usize = 6;
+
+/// What one update did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OnlineUpdate {
+    /// Whether the v and ω channels' change detectors raised an alarm at this sample.
+    pub change: [bool; 2],
+}
+
+/// The online estimator of θ1…θ6 (module docs). Every update works on fixed-size arrays: no
+/// allocation.
+#[derive(Debug, Clone)]
+pub struct OnlineTheta {
+    /// The prefilter's pole p.
+    pole: f64,
+    /// Its two stages' states per signal (v_ref, ω_ref, v, ω, ω², v ω).
+    state: [[f64; 2]; SIGNALS],
+    /// The filtered signals of the last two samples (newest first), once there.
+    last: [Option<[f64; SIGNALS]>; 2],
+    /// v channel: (a, β0, β1, c) of (θ1, θ3, θ4); ω channel: of (θ2, θ5, θ6).
+    rls: [Rls<4>; 2],
+    dt: f64,
+}
+
+impl OnlineTheta {
+    /// An estimator for samples `dt_s` seconds apart, started with no prior knowledge (as
+    /// eq. 4.2–4.7 need none).
+    ///
+    /// # Errors
+    /// [`Error::InvalidSetting`] if `dt_s` is not positive and finite, the cut-off is not in
+    /// (0, Nyquist), the memory is not positive, or the RLS settings are invalid
+    /// ([`Rls::new`]).
+    pub fn new(settings: OnlineSettings, dt_s: f64) -> Result<Self> {
+        let bad = |m: String| Err(Error::InvalidSetting(m));
+        if !(dt_s > 0.0 && dt_s.is_finite()) {
+            return bad(format!("sample period {dt_s} s is not positive"));
+        }
+        let pole = match settings.cutoff_hz {
+            None => 0.5,
+            Some(fc) if fc > 0.0 && fc < 0.5 / dt_s => {
+                (-2.0 * std::f64::consts::PI * fc * dt_s).exp()
+            }
+            Some(fc) => {
+                return bad(format!(
+                    "cut-off {fc} Hz is not in (0, {}) Hz, the Nyquist band at {dt_s} s",
+                    0.5 / dt_s
+                ));
+            }
+        };
+        if settings.memory_s.is_nan() || settings.memory_s <= dt_s {
+            return bad(format!(
+                "memory {} s is not longer than the period",
+                settings.memory_s
+            ));
+        }
+        let rls_settings = RlsSettings {
+            forgetting: 1.0 - dt_s / settings.memory_s,
+            initial_variance: settings.initial_variance,
+            detection: settings.detection.map(|d| ChangeDetection {
+                warmup: (settings.warmup_s / dt_s).ceil() as u64,
+                ..d
+            }),
+        };
+        Ok(Self {
+            pole,
+            state: [[0.0; 2]; SIGNALS],
+            last: [None; 2],
+            rls: [
+                Rls::new(rls_settings, [0.0; 4])?,
+                Rls::new(rls_settings, [0.0; 4])?,
+            ],
+            dt: dt_s,
+        })
+    }
+
+    /// Takes the next sample: the commands `v_ref` \[m/s\], `w_ref` \[rad/s\] applied from
+    /// it on, and the measured `v` \[m/s\], `w` \[rad/s\] it carries. The first two samples
+    /// only fill the filters. A non-finite sample is skipped.
+    pub fn update(&mut self, v_ref: f64, w_ref: f64, v: f64, w: f64) -> OnlineUpdate {
+        let raw = [v_ref, w_ref, v, w, w * w, v * w];
+        let quiet = OnlineUpdate { change: [false; 2] };
+        if raw.iter().any(|x| !x.is_finite()) {
+            return quiet;
+        }
+        let p = self.pole;
+        let mut now = [0.0; SIGNALS];
+        for ((s, x), f) in self.state.iter_mut().zip(raw).zip(&mut now) {
+            s[0] = p * s[0] + (1.0 - p) * x;
+            s[1] = p * s[1] + (1.0 - p) * s[0];
+            *f = s[1];
+        }
+        let [Some(q), Some(o)] = self.last else {
+            self.last = [Some(now), self.last[0]];
+            return quiet;
+        };
+        self.last = [Some(now), Some(q)];
+        // [y_k, u_k, u_{k−1}, n̄_k] → y_{k+1}, per channel.
+        let v_row = [q[2], q[0], o[0], 0.5 * (q[4] + now[4])];
+        let w_row = [q[3], q[1], o[1], 0.5 * (q[5] + now[5])];
+        OnlineUpdate {
+            change: [
+                self.rls[0].update(&v_row, now[2]).change,
+                self.rls[1].update(&w_row, now[3]).change,
+            ],
+        }
+    }
+
+    /// θ̂1…θ̂6 (the units of `wheelid_models::regressor::PARAMS`; NaN while a channel's
+    /// difference equation does not map to θ: 0 < a < 1 and β0 + β1 > 0 not yet met).
+    pub fn theta(&self) -> [f64; 6] {
+        let (v, w) = (self.channel(0).0, self.channel(1).0);
+        [v[0], w[0], v[1], v[2], w[1], w[2]]
+    }
+
+    /// Standard errors of θ̂1…θ̂6 (delta method from σ̂² P; NaN where θ̂ is).
+    pub fn std_err(&self) -> [f64; 6] {
+        let (v, w) = (self.channel(0).1, self.channel(1).1);
+        [v[0], w[0], v[1], v[2], w[1], w[2]]
+    }
+
+    /// Channel `i`'s (lag, coupling, gain) parameters — (θ1, θ3, θ4) or (θ2, θ5, θ6) — and
+    /// their standard errors.
+    fn channel(&self, i: usize) -> ([f64; 3], [f64; 3]) {
+        let r = &self.rls[i];
+        let [a, b0, b1, c] = r.theta();
+        let s = b0 + b1;
+        let nan = ([f64::NAN; 3], [f64::NAN; 3]);
+        if !(a > 0.0 && a < 1.0 && s > 0.0) {
+            return nan;
+        }
+        let sign = if i == 0 { 1.0 } else { -1.0 };
+        let t = self.dt;
+        let ln = a.ln();
+        let gain = (1.0 - a) / s;
+        let lag = -gain * t / ln;
+        let coupling = sign * c / s;
+        // Jacobians by (a, β0, β1, c); β0 and β1 enter through s alone.
+        let d_gain = [-1.0 / s, -gain / s, -gain / s, 0.0];
+        let d_lag = [
+            -t * d_gain[0] / ln + gain * t / (a * ln * ln),
+            -t * d_gain[1] / ln,
+            -t * d_gain[2] / ln,
+            0.0,
+        ];
+        let d_coupling = [0.0, -coupling / s, -coupling / s, sign / s];
+        let p = r.p();
+        let var = r.noise_variance();
+        let se = |g: &[f64; 4]| {
+            let mut q = 0.0;
+            for (j, gj) in g.iter().enumerate() {
+                for (k, gk) in g.iter().enumerate() {
+                    q += gj * p[j][k] * gk;
+                }
+            }
+            (var * q).max(0.0).sqrt()
+        };
+        (
+            [lag, coupling, gain],
+            [se(&d_lag), se(&d_coupling), se(&d_gain)],
+        )
+    }
+
+    /// Alarms raised so far by the v and ω channels' detectors.
+    pub fn changes(&self) -> [u64; 2] {
+        [self.rls[0].changes(), self.rls[1].changes()]
+    }
+
+    /// The sample period \[s\].
+    pub fn dt(&self) -> f64 {
+        self.dt
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Noise-free samples of eq. 2.19 under held commands (a fine Euler integration), with
+    /// the velocities as instants: θ back to 10⁻³.
+    #[test]
+    fn the_difference_equation_gives_theta_back() {
+        let theta = [0.26, 0.25, 0.005, 1.0, 0.2, 1.0];
+        let dt = 0.05;
+        let sub = 500;
+        let h = dt / sub as f64;
+        let mut est = OnlineTheta::new(
+            OnlineSettings {
+                detection: None,
+                memory_s: 1e9,
+                ..OnlineSettings::default()
+            },
+            dt,
+        )
+        .expect("settings");
+        let (mut v, mut w) = (0.0f64, 0.0f64);
+        for k in 0..4000 {
+            let t = k as f64 * dt;
+            let u = [
+                0.3 + 0.2 * (1.3 * t).sin() + 0.1 * (4.1 * t).sin(),
+                0.5 * (0.9 * t).sin() + 0.3 * (3.3 * t).sin(),
+            ];
+            est.update(u[0], u[1], v, w);
+            for _ in 0..sub {
+                let dv = (theta[2] * w * w - theta[3] * v + u[0]) / theta[0];
+                let dw = (-theta[4] * v * w - theta[5] * w + u[1]) / theta[1];
+                v += h * dv;
+                w += h * dw;
+            }
+        }
+        let got = est.theta();
+        for i in 0..6 {
+            assert!(
+                (got[i] - theta[i]).abs() < 1e-3 * theta[i].abs().max(1.0),
+                "θ{} = {} vs {}",
+                i + 1,
+                got[i],
+                theta[i]
+            );
+        }
+    }
+
+    #[test]
+    fn bad_settings_are_errors() {
+        let s = OnlineSettings::default();
+        assert!(OnlineTheta::new(s, 0.0).is_err());
+        let fast = OnlineSettings {
+            cutoff_hz: Some(30.0),
+            ..s
+        };
+        assert!(OnlineTheta::new(fast, 0.02).is_err());
+        assert!(OnlineTheta::new(s, 0.02).is_ok());
+        assert!(OnlineTheta::new(s, 0.02).expect("ok").theta()[0].is_nan());
+    }
+}

@@ -1,0 +1,135 @@
+//! Online identification (issue 18, `wheelid::online`) on physics the model did not write: the
+//! rigid-body backend (rapier3d-f64), its recordings stamped as hosts stamp them (velocities
+//! averaged over the period ending at the stamp, encoder ticks), against the θ its physical
+//! map derives from the same constants and against the batch output-error answer.
+
+use wheelid::identify::{IdentifySettings, identify};
+use wheelid::models;
+use wheelid::online::{OnlineSettings, OnlineTheta};
+use wheelid::robots::physics::{
+    Payload, PhysicalProfile, PhysicsEffects, PhysicsSettings, simulate_physics_recording,
+};
+use wheelid::solvers::Ols;
+use wheelid_core::{Recording, Timing};
+
+fn record(p: &PhysicalProfile, seed: u64, duration_s: f64, effects: PhysicsEffects) -> Recording {
+    let s = PhysicsSettings {
+        duration_s,
+        seed,
+        timing: Timing::WindowEnd,
+        effects,
+        ..PhysicsSettings::default()
+    };
+    simulate_physics_recording(p, &p.random_multisine(seed).expect("excitation"), &s)
+        .expect("simulates")
+}
+
+/// The estimator run over `rec`, with θ̂ after every sample.
+fn online(rec: &Recording, settings: OnlineSettings) -> (OnlineTheta, Vec<[f64; 6]>) {
+    let dt = (rec.t[rec.len() - 1] - rec.t[0]) / (rec.len() - 1) as f64;
+    let mut est = OnlineTheta::new(settings, dt).expect("settings");
+    let path = (0..rec.len())
+        .map(|k| {
+            est.update(rec.v_ref[k], rec.w_ref[k], rec.v[k], rec.w[k]);
+            est.theta()
+        })
+        .collect();
+    (est, path)
+}
+
+fn pct(a: f64, b: f64) -> f64 {
+    100.0 * (a - b) / b
+}
+
+/// Both robots, one recording each: θ1, θ2, θ4, θ6 online within 1 % of the batch
+/// output-error answer and of the physical map, and no change alarm on a steady robot.
+#[test]
+fn online_theta_converges_to_the_batch_answer_on_physics() {
+    for (name, duration) in [("pioneer3dx", 150.0), ("khepera3", 60.0)] {
+        let p = PhysicalProfile::by_name(name).expect("profile");
+        let rec = record(&p, 1, duration, PhysicsEffects::default());
+        let model = models::by_name(p.model_name()).expect("model");
+        let batch = identify(
+            std::slice::from_ref(&rec),
+            model.as_ref(),
+            &Ols::default(),
+            &IdentifySettings::default(),
+        )
+        .expect("identifies");
+        let (est, _) = online(&rec, OnlineSettings::default());
+        let (th, se) = (est.theta(), est.std_err());
+        eprintln!(
+            "{name}: map {:.5?}\n  batch {:.5?}\n  online {th:.5?}\n  ± {se:.5?}, alarms {:?}",
+            p.theta(),
+            batch.theta,
+            est.changes()
+        );
+        for i in [0, 1, 3, 5] {
+            let (to_batch, to_map) = (pct(th[i], batch.theta[i]), pct(th[i], p.theta()[i]));
+            eprintln!(
+                "  θ{}: {to_batch:+.3} % of batch, {to_map:+.3} % of map, {:.0} standard \
+                 errors from batch",
+                i + 1,
+                (th[i] - batch.theta[i]).abs() / se[i]
+            );
+            assert!(
+                to_batch.abs() < 1.0 && to_map.abs() < 1.0,
+                "{name} θ{}",
+                i + 1
+            );
+        }
+        assert_eq!(
+            est.changes(),
+            [0, 0],
+            "{name}: a steady robot raised an alarm"
+        );
+    }
+}
+
+/// The Pioneer-like robot with 60 % of its mass set down 1.2 b ahead of the axle at 80 s of
+/// 150 s: the change is detected and θ1, θ2 are within 5 % of the loaded robot's map 5 s after
+/// the payload is down (and stay there to the end).
+#[test]
+fn online_theta_tracks_a_payload_step_within_5_s() {
+    let p = PhysicalProfile::pioneer3dx();
+    let payload = Payload {
+        mass_kg: 0.6 * p.m,
+        at_s: 80.0,
+        x_m: 0.5 * p.caster_x,
+        size_m: p.d / 3.0,
+    };
+    let effects = PhysicsEffects {
+        payload: Some(payload),
+        ..PhysicsEffects::default()
+    };
+    let rec = record(&p, 2, 150.0, effects);
+    let (before, after) = (p.theta(), payload.loaded(&p).theta());
+    let (est, path) = online(&rec, OnlineSettings::default());
+    let at = |t: f64| rec.t.iter().position(|&x| x >= t).expect("in the run");
+    eprintln!(
+        "θ before {before:.4?}, after {after:.4?}\n  online at 79 s {:.4?}\n  at 85 s {:.4?}\n  \
+         at the end {:.4?}, alarms {:?}",
+        path[at(79.0)],
+        path[at(85.0)],
+        est.theta(),
+        est.changes()
+    );
+    // The first sample from which θ1 and θ2 stay within 5 % of the loaded map.
+    let near = |k: usize| (0..2).all(|i| pct(path[k][i], after[i]).abs() < 5.0);
+    let settled = (at(payload.at_s)..rec.len())
+        .rev()
+        .take_while(|&k| near(k))
+        .last()
+        .expect("within 5 % at the end");
+    let delay = rec.t[settled] - payload.at_s;
+    eprintln!("  θ1, θ2 within 5 % of the loaded map {delay:.2} s after the payload is down");
+    for i in [0, 1] {
+        assert!(
+            pct(path[at(79.0)][i], before[i]).abs() < 2.0,
+            "θ{} before",
+            i + 1
+        );
+    }
+    assert!(delay <= 5.0, "{delay} s");
+    assert!(est.changes().iter().any(|&c| c >= 1));
+}

@@ -1,0 +1,54 @@
+//! The online estimator allocates nothing per sample (issue 18): a counting global allocator
+//! around 100 000 updates and reads of θ̂ and its standard errors. Its own binary, since the
+//! allocator is global.
+
+// A global allocator is an unsafe trait: this test binary alone implements one.
+#![allow(unsafe_code)]
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use wheelid::online::{OnlineSettings, OnlineTheta};
+
+struct Counting;
+
+static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
+
+// SAFETY: every call is passed on to the system allocator unchanged; the counter is atomic.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+        // SAFETY: the caller's layout, as GlobalAlloc::alloc requires.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: ptr came from System.alloc with this layout.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+        // SAFETY: as GlobalAlloc::realloc requires, passed on.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+#[test]
+fn an_update_allocates_nothing() {
+    let mut est = OnlineTheta::new(OnlineSettings::default(), 0.02).expect("settings");
+    let mut sum = 0.0;
+    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    for k in 0..100_000 {
+        let t = k as f64 * 0.02;
+        let (u, w) = ((0.7 * t).sin(), (1.9 * t).cos());
+        let change = est.update(u, w, 0.9 * u, 0.8 * w);
+        sum += est.theta()[0] + est.std_err()[1] + f64::from(u8::from(change.change[0]));
+    }
+    let after = ALLOCATIONS.load(Ordering::SeqCst);
+    assert_eq!(after - before, 0, "allocations in 100 000 updates");
+    // Checks the counter counts: a Vec allocates.
+    let v = std::hint::black_box(vec![sum; 3]);
+    assert!(ALLOCATIONS.load(Ordering::SeqCst) > after, "{}", v.len());
+}
