@@ -172,33 +172,43 @@ impl OnlineTheta {
     /// θ̂1…θ̂6 (the units of `wheelid_models::regressor::PARAMS`; NaN while a channel's
     /// difference equation does not map to θ: 0 < a < 1 and β0 + β1 > 0 not yet met).
     pub fn theta(&self) -> [f64; 6] {
-        let (v, w) = (self.channel(0).0, self.channel(1).0);
+        let (v, w) = (self.channel(0), self.channel(1));
         [v[0], w[0], v[1], v[2], w[1], w[2]]
     }
 
     /// Standard errors of θ̂1…θ̂6 (delta method from σ̂² P; NaN where θ̂ is).
     pub fn std_err(&self) -> [f64; 6] {
-        let (v, w) = (self.channel(0).1, self.channel(1).1);
+        let (v, w) = (self.channel_std_err(0), self.channel_std_err(1));
         [v[0], w[0], v[1], v[2], w[1], w[2]]
     }
 
-    /// Channel `i`'s (lag, coupling, gain) parameters — (θ1, θ3, θ4) or (θ2, θ5, θ6) — and
-    /// their standard errors.
-    fn channel(&self, i: usize) -> ([f64; 3], [f64; 3]) {
-        let r = &self.rls[i];
-        let [a, b0, b1, c] = r.theta();
+    /// Channel `i`'s (a, β0 + β1, c), if they map to θ (0 < a < 1, β0 + β1 > 0), and the
+    /// sign of its coupling term (+θ3 for v, −θ5 for ω).
+    fn difference_equation(&self, i: usize) -> Option<(f64, f64, f64, f64)> {
+        let [a, b0, b1, c] = self.rls[i].theta();
         let s = b0 + b1;
-        let nan = ([f64::NAN; 3], [f64::NAN; 3]);
-        if !(a > 0.0 && a < 1.0 && s > 0.0) {
-            return nan;
-        }
         let sign = if i == 0 { 1.0 } else { -1.0 };
-        let t = self.dt;
-        let ln = a.ln();
+        (a > 0.0 && a < 1.0 && s > 0.0).then_some((a, s, c, sign))
+    }
+
+    /// Channel `i`'s (lag, coupling, gain): (θ1, θ3, θ4) or (θ2, θ5, θ6).
+    fn channel(&self, i: usize) -> [f64; 3] {
+        let Some((a, s, c, sign)) = self.difference_equation(i) else {
+            return [f64::NAN; 3];
+        };
         let gain = (1.0 - a) / s;
-        let lag = -gain * t / ln;
+        [-gain * self.dt / a.ln(), sign * c / s, gain]
+    }
+
+    /// Standard errors of [`OnlineTheta::channel`] by the delta method.
+    fn channel_std_err(&self, i: usize) -> [f64; 3] {
+        let Some((a, s, c, sign)) = self.difference_equation(i) else {
+            return [f64::NAN; 3];
+        };
+        let (t, ln) = (self.dt, a.ln());
+        let gain = (1.0 - a) / s;
         let coupling = sign * c / s;
-        // Jacobians by (a, β0, β1, c); β0 and β1 enter through s alone.
+        // Jacobians by (a, β0, β1, c); β0 and β1 enter through their sum alone.
         let d_gain = [-1.0 / s, -gain / s, -gain / s, 0.0];
         let d_lag = [
             -t * d_gain[0] / ln + gain * t / (a * ln * ln),
@@ -207,8 +217,7 @@ impl OnlineTheta {
             0.0,
         ];
         let d_coupling = [0.0, -coupling / s, -coupling / s, sign / s];
-        let p = r.p();
-        let var = r.noise_variance();
+        let (p, var) = (self.rls[i].p(), self.rls[i].noise_variance());
         let se = |g: &[f64; 4]| {
             let mut q = 0.0;
             for (j, gj) in g.iter().enumerate() {
@@ -218,10 +227,7 @@ impl OnlineTheta {
             }
             (var * q).max(0.0).sqrt()
         };
-        (
-            [lag, coupling, gain],
-            [se(&d_lag), se(&d_coupling), se(&d_gain)],
-        )
+        [se(&d_lag), se(&d_coupling), se(&d_gain)]
     }
 
     /// Alarms raised so far by the v and ω channels' detectors.

@@ -224,6 +224,58 @@ fn text_quality(s: &mut String, id: &Identification) {
     }
 }
 
+/// The online estimate of a drive ([`crate::run::OnlineTrace`]) against the batch
+/// identification of the same recording: θ̂ at the end with its standard errors, the batch θ
+/// and their difference \[%\], and the times of the change alarms.
+pub fn online_text(trace: &crate::run::OnlineTrace, id: &Identification) -> String {
+    use std::fmt::Write as _;
+    let mut s = String::new();
+    let n = trace.t.len();
+    let _ = writeln!(
+        s,
+        "Online (recursive least squares while driving, {n} samples; wheelid::online):"
+    );
+    let (Some(th), Some(se)) = (trace.theta.last(), trace.std_err.last()) else {
+        return s;
+    };
+    for i in 0..6 {
+        let b = id.theta.get(i).copied().unwrap_or(f64::NAN);
+        let _ = writeln!(
+            s,
+            "  θ{} {:>10.5} ± {:.5}   batch {:>10.5}   {:+.2} %",
+            i + 1,
+            th[i],
+            se[i],
+            b,
+            100.0 * (th[i] - b) / b
+        );
+    }
+    let alarms: Vec<String> = trace
+        .t
+        .iter()
+        .zip(&trace.change)
+        .filter(|(_, c)| c[0] || c[1])
+        .map(|(t, c)| {
+            let which = match c {
+                [true, true] => "v, ω",
+                [true, false] => "v",
+                _ => "ω",
+            };
+            format!("{t:.2} s ({which})")
+        })
+        .collect();
+    let _ = writeln!(
+        s,
+        "  change alarms: {}",
+        if alarms.is_empty() {
+            "none".to_owned()
+        } else {
+            alarms.join(", ")
+        }
+    );
+    s
+}
+
 /// JSON report of a tracking run:
 /// `{"robot", "theta_true": [6], "theta_hat0": [6], "theta_hat_final": [6],
 ///   "error_m": {"rms", "final", "max"}, "duration_s", "steps", "adaptation": {…}}`.

@@ -1,8 +1,9 @@
 //! Config-driven runs (`wheelid run CONFIG.toml`): one TOML file describes a whole
 //! identification — robot backend, excitation, duration, model, solver and bounds,
 //! conditioning, outputs — and the run walks the layers once: **drive** the robot (read, then
-//! send, once per period) → **record** → **identify** → **write** the recording (CSV), the
-//! identified model (TOML) and the report (text and JSON).
+//! send, once per period; optionally estimating θ̂ online as it goes) → **record** →
+//! **identify** → **write** the recording (CSV), the identified model (TOML) and the report
+//! (text and JSON).
 //!
 //! ```toml
 //! plugins = ["wheelid_turtlebot_plugin"]  # optional: a name beside the executable, or a path
@@ -28,6 +29,9 @@
 //! [identify]              # estimator (ls | iv | oe) and conditioning
 //! estimator = "ls"
 //! cutoff_hz = 1.0
+//!
+//! [online]                # optional (or `run --online`): θ̂ while driving, online.csv
+//! memory_s = 60.0         # wheelid::online::OnlineSettings
 //!
 //! [output]
 //! dir = "run-out"         # recording.csv, model.toml, report.txt, report.json
@@ -59,6 +63,7 @@ use crate::config::{ExcitationConfig, robot_profile};
 use crate::files::{ModelFile, toml_msg};
 use crate::identify::{Identification, IdentifySettings, identify_with};
 use crate::observer::Observer;
+use crate::online::{OnlineSettings, OnlineTheta};
 use crate::plugins::Plugins;
 use crate::registry::Registry;
 
@@ -375,6 +380,8 @@ struct RunFile {
     solver: toml::Spanned<toml::Table>,
     #[serde(default)]
     identify: IdentifySection,
+    /// `[online]`: θ̂ estimated while driving ([`crate::online`]).
+    online: Option<OnlineSettings>,
     output: OutputSection,
 }
 
@@ -396,8 +403,60 @@ pub struct RunOutput {
     pub recording: Recording,
     /// The identification.
     pub identification: Identification,
+    /// θ̂ as the online estimator followed it while driving, when asked for.
+    pub online: Option<OnlineTrace>,
     /// The files written.
     pub files: Vec<PathBuf>,
+}
+
+/// How a run is asked for beyond its file.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct RunOptions {
+    /// Estimate θ̂ online while driving ([`crate::online`]), with the file's `[online]`
+    /// settings or the defaults.
+    pub online: bool,
+}
+
+/// The online estimate after every sample of a drive (n samples each).
+#[derive(Debug, Clone, Default)]
+pub struct OnlineTrace {
+    /// Sample times \[s\].
+    pub t: Vec<f64>,
+    /// θ̂1…θ̂6 (NaN until a channel maps to θ).
+    pub theta: Vec<[f64; 6]>,
+    /// Their standard errors.
+    pub std_err: Vec<[f64; 6]>,
+    /// Change alarms of the v and ω channels at each sample.
+    pub change: Vec<[bool; 2]>,
+}
+
+impl OnlineTrace {
+    /// Writes the trace as CSV: `t, theta1…theta6, se1…se6, change_v, change_w`.
+    ///
+    /// # Errors
+    /// The file cannot be written (named).
+    pub fn write_csv(&self, path: &Path) -> Result<()> {
+        let write = || -> Result<()> {
+            let mut w = csv::Writer::from_writer(Vec::new());
+            let mut head = vec!["t".to_owned()];
+            head.extend((1..=6).map(|i| format!("theta{i}")));
+            head.extend((1..=6).map(|i| format!("se{i}")));
+            head.extend(["change_v".into(), "change_w".into()]);
+            w.write_record(&head)?;
+            for k in 0..self.t.len() {
+                let mut row = vec![self.t[k].to_string()];
+                row.extend(self.theta[k].iter().map(|x| x.to_string()));
+                row.extend(self.std_err[k].iter().map(|x| x.to_string()));
+                row.extend(self.change[k].iter().map(|&c| u8::from(c).to_string()));
+                w.write_record(&row)?;
+            }
+            let bytes = w.into_inner().map_err(|e| anyhow!("{}", e.error()))?;
+            // Whole or not at all.
+            wheelid_core::recording::write_atomic(path, &bytes)?;
+            Ok(())
+        };
+        write().with_context(|| format!("writing {}", path.display()))
+    }
 }
 
 /// One pluggable table: its `type`, its text, and where it sits in the file.
@@ -517,6 +576,16 @@ pub fn parse_config(text: &str, path: &Path) -> Result<()> {
 /// identification that fails never loses it); the model and the reports only after the
 /// identification succeeded; each file atomically.
 pub fn run(path: &Path, observer: &dyn Observer) -> Result<RunOutput> {
+    run_with(path, observer, RunOptions::default())
+}
+
+/// [`run`] with `options`: with `online` (or an `[online]` table in the file) θ̂ is also
+/// estimated while driving ([`crate::online`]) and written to `online.csv` beside the other
+/// outputs; the observer's message then carries the current θ̂.
+///
+/// # Errors
+/// As [`run`]; invalid `[online]` settings.
+pub fn run_with(path: &Path, observer: &dyn Observer, options: RunOptions) -> Result<RunOutput> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     let file: RunFile = toml::from_str(&text)
@@ -560,8 +629,24 @@ pub fn run(path: &Path, observer: &dyn Observer) -> Result<RunOutput> {
     {
         bail!("{}: duration_s = {d} must be > 0", path.display());
     }
-    let recording = drive(robot.as_mut(), &excitation, duration, observer)
-        .with_context(|| format!("driving the {} robot", robot.name()))?;
+    let mut online = match (file.online, options.online) {
+        (Some(o), _) => Some(o),
+        (None, true) => Some(OnlineSettings::default()),
+        (None, false) => None,
+    }
+    .map(|o| OnlineTheta::new(o, robot.period_s()))
+    .transpose()
+    .with_context(|| format!("{}: [online]", path.display()))?
+    .map(|est| (est, OnlineTrace::default()));
+    let recording = drive_online(
+        robot.as_mut(),
+        &excitation,
+        duration,
+        observer,
+        online.as_mut().map(|(e, t)| (e, t)),
+    )
+    .with_context(|| format!("driving the {} robot", robot.name()))?;
+    let online = online.map(|(_, trace)| trace);
     let settings = IdentifySettings {
         bounds,
         estimator: estimator.unwrap_or_else(|| IdentifySettings::default().estimator),
@@ -595,9 +680,15 @@ pub fn run(path: &Path, observer: &dyn Observer) -> Result<RunOutput> {
     )
     .with_context(|| format!("identifying (the drive is kept in {})", files[0].display()))?;
     write_outputs(&files, &recording, &identification)?;
+    let mut files = files;
+    if let Some(trace) = &online {
+        files.push(dir.join("online.csv"));
+        trace.write_csv(&files[4])?;
+    }
     Ok(RunOutput {
         recording,
         identification,
+        online,
         files,
     })
 }
@@ -765,6 +856,21 @@ pub fn drive(
     duration: Option<f64>,
     observer: &dyn Observer,
 ) -> Result<Recording> {
+    drive_online(robot, excitation, duration, observer, None)
+}
+
+/// [`drive`], feeding every sample to an online estimator as it comes and keeping its θ̂ in
+/// `trace`; the observer's message then carries θ̂1, θ̂2.
+///
+/// # Errors
+/// As [`drive`].
+pub fn drive_online(
+    robot: &mut dyn Robot,
+    excitation: &wheelid_robots::Excitation,
+    duration: Option<f64>,
+    observer: &dyn Observer,
+    mut online: Option<(&mut OnlineTheta, &mut OnlineTrace)>,
+) -> Result<Recording> {
     let dt = robot.period_s();
     if !(dt.is_finite() && dt > 0.0) {
         bail!("the robot's period {dt} s must be > 0");
@@ -795,7 +901,19 @@ pub fn drive(
             ]) {
                 c.push(x);
             }
-            observer.progress("driving", k as u64 + 1, planned);
+            match online.as_mut() {
+                Some((est, trace)) => {
+                    let u = est.update(v_ref, w_ref, o.v, o.w);
+                    let th = est.theta();
+                    trace.t.push(o.t);
+                    trace.theta.push(th);
+                    trace.std_err.push(est.std_err());
+                    trace.change.push(u.change);
+                    let msg = format!("driving · online θ̂1 {:.4} θ̂2 {:.4}", th[0], th[1]);
+                    observer.progress(&msg, k as u64 + 1, planned);
+                }
+                None => observer.progress("driving", k as u64 + 1, planned),
+            }
         }
         Ok(())
     })();

@@ -80,12 +80,31 @@ fn the_simulator_config_identifies_the_pioneer_and_writes_every_output() {
     assert_eq!(json["model"], "vw-pd");
 }
 
+/// Also `run --online` (issue 18): θ̂ estimated while driving lands within 1 % of the batch
+/// answer in θ1, θ2, θ4, θ6, with no change alarm, and `online.csv` holds every sample.
 #[test]
 fn the_physics_config_identifies_the_rigid_body_khepera_within_one_percent_of_its_map() {
-    let out = run(&config("run_physics.toml"), &Silent).expect("runs");
+    let options = wheelid::run::RunOptions { online: true };
+    let out = wheelid::run::run_with(&config("run_physics.toml"), &Silent, options).expect("runs");
     assert_eq!(out.recording.meta("timing"), Some("window_end"));
     let map = wheelid::robots::physics::PhysicalProfile::khepera3().theta();
     assert_close(&out.identification.theta, &map, 0.01, "physics khepera");
+    let trace = out.online.expect("online trace");
+    assert_eq!(trace.t.len(), out.recording.len());
+    let last = trace.theta.last().expect("samples");
+    for i in [0, 1, 3, 5] {
+        let e = (last[i] - out.identification.theta[i]) / out.identification.theta[i];
+        assert!(e.abs() < 0.01, "online θ{} off the batch by {e}", i + 1);
+    }
+    assert!(trace.change.iter().all(|c| !c[0] && !c[1]));
+    let csv = out
+        .files
+        .iter()
+        .find(|f| f.ends_with("online.csv"))
+        .expect("online.csv");
+    let text = std::fs::read_to_string(csv).expect("written");
+    assert_eq!(text.lines().count(), trace.t.len() + 1);
+    assert!(text.starts_with("t,theta1,"));
 }
 
 #[test]

@@ -14,11 +14,16 @@ pub(crate) struct RunArgs {
     /// Print the report as JSON.
     #[arg(long)]
     json: bool,
+    /// Also estimate θ̂ online while driving (recursive least squares with change detection;
+    /// the file's `[online]` table or its defaults) and write `online.csv`.
+    #[arg(long)]
+    online: bool,
 }
 
 pub(crate) fn run_run(a: RunArgs) -> Result<()> {
     let bar = Bar::new(!a.json, "{spinner} {msg} [{bar:30}] {pos}/{len} samples");
-    let out = wheelid::run::run(&a.config, &bar);
+    let options = wheelid::run::RunOptions { online: a.online };
+    let out = wheelid::run::run_with(&a.config, &bar, options);
     bar.0.finish_and_clear();
     let out = out?;
     if a.json {
@@ -28,6 +33,9 @@ pub(crate) fn run_run(a: RunArgs) -> Result<()> {
         );
     } else {
         out_raw!("{}", report::to_text(&out.identification, None));
+        if let Some(trace) = &out.online {
+            out_raw!("{}", report::online_text(trace, &out.identification));
+        }
         for f in &out.files {
             out!("written: {}", f.display());
         }
