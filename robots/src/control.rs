@@ -225,6 +225,21 @@ impl AdaptiveController {
         self.theta_hat
     }
 
+    /// Replaces θ̂ — e.g. with an online estimate (`wheelid::online`) after a detected payload
+    /// change — clamped into the projection's bounds (eq. 4.9) where they are set. Non-finite
+    /// entries (an online estimate not yet mapped to θ) leave their θ̂_i as it is. Returns the
+    /// θ̂ now in use.
+    pub fn set_theta_hat(&mut self, theta: [f64; 6]) -> [f64; 6] {
+        for (i, (th, x)) in self.theta_hat.iter_mut().zip(theta).enumerate() {
+            if x.is_finite() {
+                let hi = self.settings.upper.map_or(f64::INFINITY, |b| b[i]);
+                let lo = self.settings.lower.map_or(f64::NEG_INFINITY, |b| b[i]);
+                *th = x.clamp(lo, hi);
+            }
+        }
+        self.theta_hat
+    }
+
     /// One controller step at time `t` \[s\] with period `dt` \[s\]: from the kinematic commands
     /// `kinematic` = (v_ref^k, ω_ref^k) and the measured (v, ω), returns the command
     /// (v_ref [m/s], ω_ref [rad/s]) = G θ̂ and then advances θ̂ by one Euler step of the
@@ -363,6 +378,19 @@ mod tests {
         // θ5 sits at its upper bound and its update (5·vω·ω̃ > 0) points outward: held.
         assert!(g[1][4] * err[1] > 0.0);
         assert_eq!(th[4], 0.5);
+    }
+
+    #[test]
+    fn a_set_theta_hat_is_projected_and_skips_nan() {
+        let settings = AdaptiveSettings {
+            upper: Some([1.0; 6]),
+            lower: Some([0.1; 6]),
+            ..AdaptiveSettings::default()
+        };
+        let mut c = AdaptiveController::new(settings, [0.3; 6]).expect("valid");
+        let th = c.set_theta_hat([0.5, 2.0, 0.0, f64::NAN, 0.2, 1.0]);
+        assert_eq!(th, [0.5, 1.0, 0.1, 0.3, 0.2, 1.0]);
+        assert_eq!(c.theta_hat(), th);
     }
 
     #[test]
