@@ -29,6 +29,7 @@
 //! ```
 
 pub mod config;
+pub mod design;
 pub mod diagnose;
 pub mod estimators;
 pub mod export;

@@ -98,13 +98,19 @@ enum Command {
     /// MPPI controller (limits found by diagnosis, wheel geometry of the built-in profile) and
     /// the response lag.
     Export(ExportArgs),
+    /// Design the excitation that identifies θ to an accuracy in the shortest drive.
+    ///
+    /// Multisine amplitudes chosen on the Fisher information of the output-error problem at a
+    /// prior θ, within the robot's top speeds and a floor space; prints the predicted standard
+    /// errors and the drive's length, and writes the plan for `wheelid run`.
+    Design(DesignArgs),
 }
 
 mod cli;
 
 use cli::{
-    diagnose::DiagnoseArgs, export::ExportArgs, identify::IdentifyArgs, migrate::MigrateArgs,
-    run::RunArgs, simulate::SimulateArgs, track::TrackArgs,
+    design::DesignArgs, diagnose::DiagnoseArgs, export::ExportArgs, identify::IdentifyArgs,
+    migrate::MigrateArgs, run::RunArgs, simulate::SimulateArgs, track::TrackArgs,
 };
 
 /// The built-in physical profile `name` (default `khepera3`).
@@ -167,5 +173,6 @@ fn main() -> Result<()> {
         Command::Track(a) => cli::track::run_track(a),
         Command::Migrate(a) => cli::migrate::run_migrate(a),
         Command::Export(a) => cli::export::run_export(a),
+        Command::Design(a) => cli::design::run_design(a),
     }
 }

@@ -33,6 +33,8 @@
 //!   instantaneous frequency θ'(t)/2π = f₀ + (f₁ − f₀) t/T. After T the sweep does not repeat:
 //!   the phase continues at f₁ (θ = θ(T) + 2π f₁ (t − T)), so u stays smooth; before 0 it runs
 //!   at f₀.
+//! * [`Signal::Sines`]: u = c + Σᵢ aᵢ sin(2π fᵢ t + φᵢ), each line its own amplitude and
+//!   phase (a designed experiment).
 //! * [`Signal::Multisine`]: u = c + a Σₖ cos(2π nₖ τ / P + φₖ), k = 1…K, on the frequency grid
 //!   nₖ/P \[Hz\] between f_min and f_max, periodic with period P, with Schroeder phases
 //!   φₖ = −k(k − 1)π/K (Schroeder 1970, low crest factor for a flat spectrum) or
@@ -356,7 +358,7 @@ pub fn crest_factor(samples: &[f64]) -> f64 {
 /// One scalar excitation signal u(t) (see the module documentation for the formulas).
 ///
 /// Serde: internally tagged by `type` (`constant`, `sum_of_sines`, `steps`, `chirp`,
-/// `multisine`), unknown fields rejected.
+/// `multisine`, `sines`), unknown fields rejected.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "type", rename_all = "snake_case", deny_unknown_fields)]
 pub enum Signal {
@@ -392,6 +394,14 @@ pub enum Signal {
     },
     /// A periodic multisine with peak normalisation (see [`Multisine`]).
     Multisine(Multisine),
+    /// u = offset + Σ aᵢ sin(2π fᵢ t + φᵢ): lines with their own amplitudes and phases (what
+    /// an experiment design gives, `wheelid::design`).
+    Sines {
+        /// Offset (units of u).
+        offset: f64,
+        /// The lines: (amplitude aᵢ in units of u, frequency fᵢ \[Hz\], phase φᵢ \[rad\]).
+        lines: Vec<(f64, f64, f64)>,
+    },
 }
 
 impl Signal {
@@ -418,6 +428,13 @@ impl Signal {
                 duration_s,
             } => offset + amplitude * chirp_phase(*f0_hz, *f1_hz, *duration_s, t).sin(),
             Self::Multisine(m) => m.at(t),
+            Self::Sines { offset, lines } => {
+                offset
+                    + lines
+                        .iter()
+                        .map(|(a, f, ph)| a * (2.0 * PI * f * t + ph).sin())
+                        .sum::<f64>()
+            }
         }
     }
 
@@ -485,6 +502,15 @@ impl Signal {
                 Ok(())
             }
             Self::Multisine(_) => Ok(()),
+            Self::Sines { offset, lines } => {
+                check("offset", *offset)?;
+                for &(a, f, ph) in lines {
+                    check("line amplitude", a)?;
+                    check("line frequency", f)?;
+                    check("line phase", ph)?;
+                }
+                Ok(())
+            }
         }
     }
 }

@@ -2,6 +2,7 @@
 //! library is `wheelid`); shared helpers (`out!`, the progress bar, plot listing) are in
 //! `main.rs`.
 
+pub(crate) mod design;
 pub(crate) mod diagnose;
 pub(crate) mod export;
 pub(crate) mod identify;
