@@ -462,3 +462,49 @@ pub fn design(model: &dyn DynamicModel, s: &DesignSettings) -> Result<Design> {
         evaluations,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// M_P against its closed form for a sine on the v channel alone (θ3 = θ5 = 0, ω = 0): the
+    /// steady response is A |G| sin(…), G(jω) = 1/(θ4 + jωθ1), ∂G/∂θ1 = −jω/(θ4 + jωθ1)², so
+    /// over one period of N samples M_11 = N A² ω² / (2 σ_v² |θ4 + jωθ1|⁴).
+    #[test]
+    fn the_information_of_a_sine_is_its_closed_form() {
+        let theta = [0.26, 0.25, 0.0, 1.0, 0.0, 1.0];
+        let mut s = DesignSettings::for_robot(theta, 0.002, [1.0, 1.0]);
+        s.period_s = 2.0;
+        let (a, f) = (0.3, 0.5);
+        let exc = Excitation {
+            v_ref: Signal::Sines {
+                offset: 0.0,
+                lines: vec![(a, f, 0.0)],
+            },
+            w_ref: Signal::Constant { value: 0.0 },
+        };
+        let (m, _) = information(&wheelid_models::VwPd, &s, &exc).expect("information");
+        let w = 2.0 * std::f64::consts::PI * f;
+        let n = s.period_s / s.dt_s;
+        let mod2 = theta[3].powi(2) + (w * theta[0]).powi(2);
+        let closed = n * a * a * w * w / (2.0 * s.noise_std[0].powi(2) * mod2 * mod2);
+        assert!(
+            (m[(0, 0)] / closed - 1.0).abs() < 0.01,
+            "M_11 {} vs {closed}",
+            m[(0, 0)]
+        );
+        // θ4's: ∂G/∂θ4 = −1/(θ4 + jωθ1)².
+        let closed44 = n * a * a / (2.0 * s.noise_std[0].powi(2) * mod2 * mod2);
+        assert!((m[(3, 3)] / closed44 - 1.0).abs() < 0.01);
+    }
+
+    #[test]
+    fn bad_settings_are_errors() {
+        let mut s = DesignSettings::for_robot([0.26, 0.25, 0.0, 1.0, 0.2, 1.0], 0.1, [1.0, 1.0]);
+        s.accuracy = 1.5;
+        assert!(design(&wheelid_models::VwPd, &s).is_err());
+        s.accuracy = 0.01;
+        s.targets = vec![7];
+        assert!(design(&wheelid_models::VwPd, &s).is_err());
+    }
+}
