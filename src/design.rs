@@ -160,6 +160,9 @@ pub struct Design {
     pub extent_m: [f64; 2],
     /// Candidate designs evaluated.
     pub evaluations: usize,
+    /// The pose (x, y) \[m\] the model predicts at every sample of the drive, from the
+    /// origin facing +x.
+    pub path_m: Vec<[f64; 2]>,
 }
 
 /// The lines of the two channels: harmonics of 1/P, log-spaced, interleaved (v even, ω odd).
@@ -310,20 +313,27 @@ fn duration(s: &DesignSettings, m: &DMatrix<f64>) -> Option<(f64, f64, [f64; 6])
     Some((needed, periods * s.period_s, se))
 }
 
-/// The largest |x|, |y| of the unicycle pose driven by the simulated (v, ω) from the origin
-/// facing +x.
-fn extent(rec: &Recording, sim: &[Vec<f64>]) -> [f64; 2] {
+/// The unicycle pose (x, y) driven by the simulated (v, ω) from the origin facing +x, at
+/// every sample.
+fn path(rec: &Recording, sim: &[Vec<f64>]) -> Vec<[f64; 2]> {
     let (mut x, mut y, mut phi) = (0.0f64, 0.0f64, 0.0f64);
-    let mut e = [0.0f64; 2];
+    let mut out = vec![[0.0, 0.0]];
     for k in 1..rec.len() {
         let dt = rec.t[k] - rec.t[k - 1];
         let (v, w) = (sim[0][k - 1], sim[1][k - 1]);
         x += v * phi.cos() * dt;
         y += v * phi.sin() * dt;
         phi += w * dt;
-        e = [e[0].max(x.abs()), e[1].max(y.abs())];
+        out.push([x, y]);
     }
-    e
+    out
+}
+
+/// The largest |x|, |y| of a path.
+fn extent(path: &[[f64; 2]]) -> [f64; 2] {
+    path.iter().fold([0.0f64; 2], |e, p| {
+        [e[0].max(p[0].abs()), e[1].max(p[1].abs())]
+    })
 }
 
 /// One candidate: its excitation, information, drive and extent.
@@ -334,7 +344,7 @@ struct Candidate {
     needed: f64,
     duration_s: f64,
     se: [f64; 6],
-    extent: [f64; 2],
+    path: Vec<[f64; 2]>,
 }
 
 /// The candidate with these shares: amplitudes at the limits, the forward ones scaled down
@@ -357,7 +367,10 @@ fn candidate(
             &amplitudes(s, &lines[1], &shares[1], 1, 1.0),
         ),
     };
-    let inside = |e: [f64; 2]| e[0] <= 0.5 * s.space_m[0] && e[1] <= 0.5 * s.space_m[1];
+    let inside = |p: &[[f64; 2]]| {
+        let e = extent(p);
+        e[0] <= 0.5 * s.space_m[0] && e[1] <= 0.5 * s.space_m[1]
+    };
     let eval = |scale: f64| -> Result<Option<Candidate>> {
         let exc = build(scale);
         let (m, log_det) = information(model, s, &exc)?;
@@ -366,7 +379,7 @@ fn candidate(
         };
         let (rec, sim, _) = respond(model, s, &exc, duration_s)?;
         Ok(Some(Candidate {
-            extent: extent(&rec, &sim),
+            path: path(&rec, &sim),
             exc,
             log_det,
             needed,
@@ -375,7 +388,7 @@ fn candidate(
         }))
     };
     let mut best = eval(1.0)?;
-    if best.as_ref().is_some_and(|c| inside(c.extent)) {
+    if best.as_ref().is_some_and(|c| inside(&c.path)) {
         return Ok(best);
     }
     // Halve until inside, then bisect between the last outside and the first inside scale.
@@ -388,7 +401,7 @@ fn candidate(
             0.5 * (lo + hi)
         };
         match eval(mid)? {
-            Some(c) if inside(c.extent) => {
+            Some(c) if inside(&c.path) => {
                 lo = mid;
                 best = Some(c);
             }
@@ -458,8 +471,9 @@ pub fn design(model: &dyn DynamicModel, s: &DesignSettings) -> Result<Design> {
         duration_s: best.duration_s,
         predicted_std_err: best.se,
         log_det_per_s: best.log_det,
-        extent_m: best.extent,
+        extent_m: extent(&best.path),
         evaluations,
+        path_m: best.path,
     })
 }
 

@@ -654,3 +654,126 @@ pub fn write_migration_plots(runs: &[(&str, &TrackResult)], dir: &Path) -> Resul
     out.push(path);
     Ok(out)
 }
+
+/// Writes `online.png` into `dir`: θ̂1…θ̂6 of an online run against time, each with the batch
+/// answer as a dashed line, the axis held to ±30 % around the batch value (the estimate
+/// starts far off); change alarms as red ticks on the time axis.
+///
+/// # Errors
+/// If the PNG cannot be written.
+pub fn write_online_plot(
+    trace: &crate::run::OnlineTrace,
+    batch: &[f64],
+    dir: &Path,
+) -> Result<PathBuf> {
+    register_font();
+    let path = dir.join("online.png");
+    let t = &trace.t;
+    if t.len() < 2 || batch.len() < 6 {
+        anyhow::bail!("an online trace of {} samples has nothing to plot", t.len());
+    }
+    let step = (t.len() / MAX_POINTS).max(1);
+    {
+        let root = BitMapBackend::new(&path, (1500, 800)).into_drawing_area();
+        root.fill(&WHITE)?;
+        for (i, area) in root.split_evenly((2, 3)).iter().enumerate() {
+            let b = batch[i];
+            let half = (0.3 * b.abs()).max(1e-3);
+            let (y0, y1) = (b - half, b + half);
+            let mut chart = ChartBuilder::on(area)
+                .caption(
+                    format!("θ̂{} online (batch dashed)", i + 1),
+                    ("sans-serif", 18),
+                )
+                .margin(8)
+                .x_label_area_size(30)
+                .y_label_area_size(60)
+                .build_cartesian_2d(t[0]..t[t.len() - 1], y0..y1)?;
+            chart.configure_mesh().x_desc("t [s]").draw()?;
+            chart.draw_series(LineSeries::new(
+                t.iter()
+                    .zip(&trace.theta)
+                    .step_by(step)
+                    .filter(|(_, th)| th[i].is_finite())
+                    .map(|(a, th)| (*a, th[i].clamp(y0, y1))),
+                BLUE.stroke_width(2),
+            ))?;
+            chart.draw_series(DashedLineSeries::new(
+                [(t[0], b), (t[t.len() - 1], b)],
+                6,
+                4,
+                BLACK.stroke_width(1),
+            ))?;
+            chart.draw_series(
+                t.iter()
+                    .zip(&trace.change)
+                    .filter(|(_, c)| c[0] || c[1])
+                    .map(|(a, _)| PathElement::new(vec![(*a, y0), (*a, y0 + 0.1 * half)], RED)),
+            )?;
+        }
+        root.present()?;
+    }
+    Ok(path)
+}
+
+/// Writes `design.png` into `dir`: a designed experiment's v_ref and ω_ref over the drive,
+/// and the pose path the model predicts from its start (the floor space as a box).
+///
+/// # Errors
+/// If the PNG cannot be written.
+pub fn write_design_plot(
+    d: &crate::design::Design,
+    space_m: [f64; 2],
+    dir: &Path,
+) -> Result<PathBuf> {
+    register_font();
+    let path = dir.join("design.png");
+    let n = d.path_m.len().max(2);
+    let dt = d.duration_s / (n - 1) as f64;
+    let t: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
+    let (v, w): (Vec<f64>, Vec<f64>) = t.iter().map(|&x| d.excitation.at(x)).unzip();
+    {
+        let root = BitMapBackend::new(&path, (1500, 700)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let (left, right) = root.split_horizontally(900);
+        let rows = left.split_evenly((2, 1));
+        time_panel(
+            &rows[0],
+            "v_ref (designed)",
+            "m/s",
+            &t,
+            &[(&v, BLUE, 2, "v_ref")],
+            None,
+        )?;
+        time_panel(
+            &rows[1],
+            "ω_ref (designed)",
+            "rad/s",
+            &t,
+            &[(&w, RED, 2, "ω_ref")],
+            None,
+        )?;
+        let (hx, hy) = (0.5 * space_m[0], 0.5 * space_m[1]);
+        let mut chart = ChartBuilder::on(&right)
+            .caption("predicted pose (floor space)", ("sans-serif", 18))
+            .margin(10)
+            .x_label_area_size(35)
+            .y_label_area_size(50)
+            .build_cartesian_2d(-hx * 1.1..hx * 1.1, -hy * 1.1..hy * 1.1)?;
+        chart
+            .configure_mesh()
+            .x_desc("x [m]")
+            .y_desc("y [m]")
+            .draw()?;
+        chart.draw_series(std::iter::once(Rectangle::new(
+            [(-hx, -hy), (hx, hy)],
+            BLACK.stroke_width(1),
+        )))?;
+        chart.draw_series(LineSeries::new(
+            d.path_m.iter().map(|p| (p[0], p[1])),
+            BLUE.stroke_width(2),
+        ))?;
+        root.present()?;
+    }
+    Ok(path)
+}

@@ -580,8 +580,8 @@ pub fn run(path: &Path, observer: &dyn Observer) -> Result<RunOutput> {
 }
 
 /// [`run`] with `options`: with `online` (or an `[online]` table in the file) θ̂ is also
-/// estimated while driving ([`crate::online`]) and written to `online.csv` beside the other
-/// outputs; the observer's message then carries the current θ̂.
+/// estimated while driving ([`crate::online`]) and written to `online.csv` and plotted in
+/// `online.png` (against the batch θ) beside the other outputs; the observer's message then carries the current θ̂.
 ///
 /// # Errors
 /// As [`run`]; invalid `[online]` settings.
@@ -684,6 +684,11 @@ pub fn run_with(path: &Path, observer: &dyn Observer, options: RunOptions) -> Re
     if let Some(trace) = &online {
         files.push(dir.join("online.csv"));
         trace.write_csv(&files[4])?;
+        files.push(crate::plot::write_online_plot(
+            trace,
+            &identification.theta,
+            &dir,
+        )?);
     }
     Ok(RunOutput {
         recording,

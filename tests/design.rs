@@ -165,6 +165,8 @@ fn the_cli_plan_drives_a_robot_through_run() {
             "--out",
         ])
         .arg(&plan)
+        .arg("--plot")
+        .arg(dir.path())
         .output()
         .expect("runs");
     let text = String::from_utf8_lossy(&o.stdout);
@@ -174,6 +176,7 @@ fn the_cli_plan_drives_a_robot_through_run() {
         String::from_utf8_lossy(&o.stderr)
     );
     assert!(text.contains("predicted standard error"), "{text}");
+    assert!(dir.path().join("design.png").exists());
     let mut cfg = std::fs::read_to_string(&plan).expect("plan written");
     cfg.push_str(
         "\n[robot]\ntype = \"simulator\"\nrobot = \"pioneer3dx\"\n\n[output]\ndir = \"out\"\n",

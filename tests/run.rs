@@ -105,6 +105,12 @@ fn the_physics_config_identifies_the_rigid_body_khepera_within_one_percent_of_it
     let text = std::fs::read_to_string(csv).expect("written");
     assert_eq!(text.lines().count(), trace.t.len() + 1);
     assert!(text.starts_with("t,theta1,"));
+    let png = out
+        .files
+        .iter()
+        .find(|f| f.ends_with("online.png"))
+        .expect("online.png");
+    assert!(std::fs::metadata(png).expect("plotted").len() > 10_000);
 }
 
 #[test]

@@ -21,10 +21,10 @@ pub(crate) struct DesignArgs {
     #[arg(long, default_value = "1%")]
     accuracy: String,
     /// White noise of the measured v [m/s] and ω [rad/s], comma-separated.
-    #[arg(long, value_delimiter = ',', num_args = 2, default_values_t = [0.005, 0.01])]
+    #[arg(long, value_delimiter = ',', default_values_t = [0.005, 0.01])]
     noise: Vec<f64>,
     /// The floor space, x and y sides [m], comma-separated (the robot starts at its centre).
-    #[arg(long, value_delimiter = ',', num_args = 2, default_values_t = [4.0, 4.0])]
+    #[arg(long, value_delimiter = ',', default_values_t = [4.0, 4.0])]
     space: Vec<f64>,
     /// Share of the robot's top speeds the commands may use.
     #[arg(long, default_value_t = 0.8)]
@@ -35,6 +35,9 @@ pub(crate) struct DesignArgs {
     /// Write the plan as a run config's `duration_s` and `[excitation]` (TOML).
     #[arg(short, long)]
     out: Option<PathBuf>,
+    /// Write `design.png` (the commands and the predicted pose) into this directory.
+    #[arg(long)]
+    plot: Option<PathBuf>,
 }
 
 fn accuracy(text: &str) -> Result<f64> {
@@ -68,6 +71,9 @@ pub(crate) fn run_design(a: DesignArgs) -> Result<()> {
         [a.speed_share * robot.v_max, a.speed_share * robot.w_max],
     );
     s.accuracy = accuracy(&a.accuracy)?;
+    if a.noise.len() != 2 || a.space.len() != 2 {
+        bail!("--noise and --space take two values each, comma-separated (v,w and x,y)");
+    }
     s.noise_std = [a.noise[0], a.noise[1]];
     s.space_m = [a.space[0], a.space[1]];
     s.criterion = if a.criterion == "d-optimal" {
@@ -96,6 +102,11 @@ pub(crate) fn run_design(a: DesignArgs) -> Result<()> {
             i + 1,
             100.0 * se / th.abs()
         );
+    }
+    if let Some(dir) = &a.plot {
+        std::fs::create_dir_all(dir).with_context(|| dir.display().to_string())?;
+        let p = wheelid::plot::write_design_plot(&d, s.space_m, dir)?;
+        out!("written: {}", p.display());
     }
     let text = plan_toml(&d)?;
     match &a.out {
