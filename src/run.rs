@@ -629,15 +629,7 @@ pub fn run_with(path: &Path, observer: &dyn Observer, options: RunOptions) -> Re
     {
         bail!("{}: duration_s = {d} must be > 0", path.display());
     }
-    let mut online = match (file.online, options.online) {
-        (Some(o), _) => Some(o),
-        (None, true) => Some(OnlineSettings::default()),
-        (None, false) => None,
-    }
-    .map(|o| OnlineTheta::new(o, robot.period_s()))
-    .transpose()
-    .with_context(|| format!("{}: [online]", path.display()))?
-    .map(|est| (est, OnlineTrace::default()));
+    let mut online = online_estimator(file.online, options, robot.period_s(), path)?;
     let recording = drive_online(
         robot.as_mut(),
         &excitation,
@@ -684,11 +676,8 @@ pub fn run_with(path: &Path, observer: &dyn Observer, options: RunOptions) -> Re
     if let Some(trace) = &online {
         files.push(dir.join("online.csv"));
         trace.write_csv(&files[4])?;
-        files.push(crate::plot::write_online_plot(
-            trace,
-            &identification.theta,
-            &dir,
-        )?);
+        let png = crate::plot::write_online_plot(trace, &identification.theta, &dir)?;
+        files.push(png);
     }
     Ok(RunOutput {
         recording,
@@ -696,6 +685,28 @@ pub fn run_with(path: &Path, observer: &dyn Observer, options: RunOptions) -> Re
         online,
         files,
     })
+}
+
+/// The online estimator a run asks for (its file's `[online]` table, or the defaults with
+/// `options.online`) for a robot sampled every `period_s`, with an empty trace; `None` when
+/// not asked for.
+///
+/// # Errors
+/// Invalid `[online]` settings, naming the file.
+fn online_estimator(
+    table: Option<OnlineSettings>,
+    options: RunOptions,
+    period_s: f64,
+    path: &Path,
+) -> Result<Option<(OnlineTheta, OnlineTrace)>> {
+    let settings = match (table, options.online) {
+        (Some(o), _) => o,
+        (None, true) => OnlineSettings::default(),
+        (None, false) => return Ok(None),
+    };
+    let est = OnlineTheta::new(settings, period_s)
+        .with_context(|| format!("{}: [online]", path.display()))?;
+    Ok(Some((est, OnlineTrace::default())))
 }
 
 /// The model and the solver (with its bounds) the config's `[model]` and `[solver]` tables
