@@ -8,8 +8,37 @@
 #[path = "../examples/diagnose_physics.rs"]
 mod harness;
 
-use harness::{RunSpec, exactly_right, parse_seeds, run_all};
+use harness::{Record, RunSpec, exactly_right, parse_seeds, run_all};
 use wheelid::core::Timing;
+
+/// One 120 s run of the Pioneer-like robot with one physics `effect`, its record printed.
+fn pioneer_run(timing: Timing, effect: &'static str, seed: u64) -> Record {
+    let spec = RunSpec {
+        profile: "pioneer3dx".into(),
+        timing,
+        effects: vec![effect],
+        seed,
+        duration_s: 120.0,
+        jitter: 0.0,
+        candidates: None,
+        cache: None,
+    };
+    let r = run_all(std::slice::from_ref(&spec), 1, &|_, _| {})
+        .pop()
+        .expect("one record");
+    eprintln!(
+        "named {:?} {:?}, unexplained {:?}, fit v {:.1}→{:.1} ω {:.1}→{:.1}, truth {:?}",
+        r.named,
+        r.named_params,
+        r.unexplained,
+        r.fit_nominal.v,
+        r.fit_final.v,
+        r.fit_nominal.w,
+        r.fit_final.w,
+        r.truth_params
+    );
+    r
+}
 
 #[test]
 fn a_clean_and_a_latency_run_of_the_khepera_complete_and_the_latency_is_a_mismatch() {
@@ -72,28 +101,7 @@ fn a_clean_and_a_latency_run_of_the_khepera_complete_and_the_latency_is_a_mismat
 /// run ended with nothing named; the same held in 5 of the 8 clamp misses on tuning seeds 1–4.
 #[test]
 fn a_pioneer_voltage_clamp_fitted_to_99_percent_is_kept() {
-    let spec = RunSpec {
-        profile: "pioneer3dx".into(),
-        timing: Timing::Instant,
-        effects: vec!["voltage_clamp"],
-        seed: 2,
-        duration_s: 120.0,
-        jitter: 0.0,
-        candidates: None,
-        cache: None,
-    };
-    let recs = run_all(std::slice::from_ref(&spec), 1, &|_, _| {});
-    let r = &recs[0];
-    eprintln!(
-        "named {:?}, unexplained {:?}, fit v {:.1}→{:.1} ω {:.1}→{:.1}, truth {:?}",
-        r.named,
-        r.unexplained,
-        r.fit_nominal.v,
-        r.fit_final.v,
-        r.fit_nominal.w,
-        r.fit_final.w,
-        r.truth_params
-    );
+    let r = &pioneer_run(Timing::Instant, "voltage_clamp", 2);
     assert!(r.error.is_none(), "{:?}", r.error);
     assert_eq!(r.named, ["effort_clamp"]);
     assert!(r.fit_final.v >= 99.0 && r.fit_final.w >= 99.0);
@@ -109,29 +117,7 @@ fn a_pioneer_voltage_clamp_fitted_to_99_percent_is_kept() {
 /// both channels explained to ≥ 95 %.
 #[test]
 fn a_pioneer_on_a_slippery_floor_is_named_traction_limit() {
-    let spec = RunSpec {
-        profile: "pioneer3dx".into(),
-        timing: Timing::Instant,
-        effects: vec!["floor_mu"],
-        seed: 2,
-        duration_s: 120.0,
-        jitter: 0.0,
-        candidates: None,
-        cache: None,
-    };
-    let recs = run_all(std::slice::from_ref(&spec), 1, &|_, _| {});
-    let r = &recs[0];
-    eprintln!(
-        "named {:?} {:?}, unexplained {:?}, fit v {:.1}→{:.1} ω {:.1}→{:.1}, truth {:?}",
-        r.named,
-        r.named_params,
-        r.unexplained,
-        r.fit_nominal.v,
-        r.fit_final.v,
-        r.fit_nominal.w,
-        r.fit_final.w,
-        r.truth_params
-    );
+    let r = &pioneer_run(Timing::Instant, "floor_mu", 2);
     assert!(r.error.is_none(), "{:?}", r.error);
     assert_eq!(r.named, ["traction_limit"]);
     assert!(r.fit_final.v >= 95.0 && r.fit_final.w >= 95.0);
@@ -156,29 +142,7 @@ fn a_pioneer_on_a_slippery_floor_is_named_traction_limit() {
 /// not judged, and the true time lies inside it.
 #[test]
 fn a_pioneer_payload_set_down_in_a_validation_block_is_named() {
-    let spec = RunSpec {
-        profile: "pioneer3dx".into(),
-        timing: Timing::WindowMiddle,
-        effects: vec!["payload"],
-        seed: 4,
-        duration_s: 120.0,
-        jitter: 0.0,
-        candidates: None,
-        cache: None,
-    };
-    let recs = run_all(std::slice::from_ref(&spec), 1, &|_, _| {});
-    let r = &recs[0];
-    eprintln!(
-        "named {:?} {:?}, unexplained {:?}, fit v {:.1}→{:.1} ω {:.1}→{:.1}, truth {:?}",
-        r.named,
-        r.named_params,
-        r.unexplained,
-        r.fit_nominal.v,
-        r.fit_final.v,
-        r.fit_nominal.w,
-        r.fit_final.w,
-        r.truth_params
-    );
+    let r = &pioneer_run(Timing::WindowMiddle, "payload", 4);
     assert!(r.error.is_none(), "{:?}", r.error);
     assert_eq!(r.named, ["payload_change"]);
     assert!(r.exactly_right);
