@@ -25,7 +25,7 @@ fn main() {
     let c = condition::condition(&u, None, fc, &ConditionSettings::default()).expect("condition");
     println!("condition {:?}", t.elapsed());
     let t = Instant::now();
-    let x = c.smooth(&c.v).expect("smooth");
+    let x = c.smooth(c.v()).expect("smooth");
     println!("one sosfiltfilt {:?}", t.elapsed());
     let t = Instant::now();
     let regs = VwPd.regression(&c).expect("reg");

@@ -157,7 +157,8 @@ pub struct SteadyStateEstimate {
     pub seconds: f64,
 }
 
-/// Data behind the plots: one recording's measured and simulated outputs.
+/// Data behind the plots: one recording's measured and simulated outputs, every k-th sample
+/// of a long recording (at most [`FileSeries::MAX_POINTS`] a series; all of a shorter one).
 #[derive(Debug, Clone)]
 pub struct FileSeries {
     /// Source.
@@ -168,6 +169,28 @@ pub struct FileSeries {
     pub measured: Vec<Vec<f64>>,
     /// Simulated (free-run) outputs per channel.
     pub simulated: Vec<Vec<f64>>,
+}
+
+impl FileSeries {
+    /// Most samples a series keeps: a plot is a few thousand pixels wide.
+    pub const MAX_POINTS: usize = 20_000;
+
+    /// Every k-th sample (k = ⌈n / [`FileSeries::MAX_POINTS`]⌉) of `rec`'s time and measured
+    /// v, ω, and of `simulated` (one series per channel, n samples each).
+    pub fn thinned(source: PathBuf, rec: &Recording, simulated: Vec<Vec<f64>>) -> Self {
+        let step = rec.len().div_ceil(Self::MAX_POINTS).max(1);
+        let thin = |x: &[f64]| -> Vec<f64> { x.iter().step_by(step).copied().collect() };
+        Self {
+            source,
+            t: thin(&rec.t),
+            measured: vec![thin(&rec.v), thin(&rec.w)],
+            simulated: if step == 1 {
+                simulated
+            } else {
+                simulated.iter().map(|y| thin(y)).collect()
+            },
+        }
+    }
 }
 
 /// The result of an identification run.

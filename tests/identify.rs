@@ -171,6 +171,66 @@ fn multi_file_run_equals_the_stacked_regression() {
     assert_eq!(id.samples, 2 * 1501);
 }
 
+/// A 200,000-sample run (the regression in several blocks, solved in two passes that never
+/// hold it): θ, its Newey–West standard errors and R² equal `Ols` on the whole regression
+/// with the run's lags, and the plots keep every k-th row.
+#[test]
+fn a_long_run_solved_block_by_block_equals_ols_on_the_whole_regression() {
+    let robot = RobotProfile {
+        period_s: 0.1,
+        ..RobotProfile::pioneer3dx()
+    };
+    let rec = simulate_recording(
+        &robot,
+        &Excitation::thesis_pioneer(),
+        &SimSettings {
+            duration_s: 19_999.9,
+            substeps: 5,
+            ..SimSettings::default()
+        },
+    )
+    .expect("simulates");
+    assert_eq!(rec.len(), 200_000);
+    let mut s = IdentifySettings {
+        estimator: "ls".into(),
+        ..IdentifySettings::default()
+    };
+    s.condition.cutoff_hz = Some(0.7);
+    let id =
+        identify(std::slice::from_ref(&rec), &WheelPd, &Ols::default(), &s).expect("identifies");
+    let c =
+        condition::condition(&rec, None, 0.7, &ConditionSettings::default()).expect("conditions");
+    let lags = (1.0_f64 / (0.1 * 0.7)).ceil() as usize;
+    for (ch, r) in WheelPd
+        .regression(&c)
+        .expect("regression")
+        .iter()
+        .enumerate()
+    {
+        let p = LinearProblem {
+            x: &r.x,
+            y: &r.y,
+            names: &["a", "b", "c"],
+            bounds: None,
+            correlation_lags: lags,
+        };
+        let fit = Ols::default().solve(&p).expect("solves");
+        for (j, &i) in r.params.iter().enumerate() {
+            approx::assert_relative_eq!(id.theta[i], fit.theta[j], max_relative = 1e-9);
+            approx::assert_relative_eq!(id.std_err[i], fit.std_err[j], max_relative = 1e-6);
+        }
+        let yhat = &r.x * &fit.theta;
+        let r2 = wheelid::core::metrics::r_squared(r.y.as_slice(), yhat.as_slice());
+        approx::assert_relative_eq!(id.channels[ch].r2, r2, max_relative = 1e-9);
+        assert_eq!(id.channels[ch].samples, r.y.len());
+        // Every 10th row of the 199,9xx: at most 20,000, the first one included.
+        let kept = &id.regressions[ch];
+        assert_eq!(kept.y.len(), r.y.len().div_ceil(10));
+        assert_eq!(kept.x.row(1), r.x.row(10));
+    }
+    assert!(id.series[0].t.len() <= 20_000);
+}
+
 #[test]
 fn a_turn_rate_that_never_changes_is_rank_deficient_and_names_theta2() {
     // θ5 = 0 and the robot already turning at ω0 = ω_ref/θ6: ω never changes while v does,

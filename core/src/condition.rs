@@ -87,14 +87,13 @@ pub struct Conditioned<'a> {
     pub dt: f64,
     /// Median period before resampling \[s\], if the recording had to be resampled.
     pub resampled_from: Option<f64>,
-    /// Commands aligned to the sample instants (see module docs, step 2) [m/s].
-    pub v_ref: Vec<f64>,
-    /// Aligned angular-velocity command [rad/s].
-    pub w_ref: Vec<f64>,
-    /// Measured forward velocity at the sample instants [m/s].
-    pub v: Vec<f64>,
-    /// Measured angular velocity at the sample instants [rad/s].
-    pub w: Vec<f64>,
+    /// The aligned columns v_ref, w_ref, v, ω (module docs, step 2), made on first use: a
+    /// caller that reads them sample by sample ([`Conditioned::aligned_sample`], the blocked
+    /// regression) never holds them.
+    aligned: std::sync::OnceLock<[Vec<f64>; 4]>,
+    /// The recording's command hold and velocity sampling (read once from its metadata).
+    hold: CommandHold,
+    sampling: VelocitySampling,
     /// The zero-phase low-pass filter used.
     pub filter: Butterworth,
     sos: Vec<Sos<f64>>,
@@ -105,12 +104,97 @@ pub struct Conditioned<'a> {
 impl Conditioned<'_> {
     /// Number of samples n.
     pub fn len(&self) -> usize {
-        self.v.len()
+        self.recording.len()
     }
 
     /// True if there are no samples.
     pub fn is_empty(&self) -> bool {
-        self.v.is_empty()
+        self.recording.is_empty()
+    }
+
+    /// The forward-velocity command aligned to the sample instants (module docs, step 2),
+    /// length n \[m/s\].
+    pub fn v_ref(&self) -> &[f64] {
+        &self.aligned()[0]
+    }
+
+    /// The aligned angular-velocity command, length n \[rad/s\].
+    pub fn w_ref(&self) -> &[f64] {
+        &self.aligned()[1]
+    }
+
+    /// The measured forward velocity at the sample instants, length n \[m/s\].
+    pub fn v(&self) -> &[f64] {
+        &self.aligned()[2]
+    }
+
+    /// The measured angular velocity at the sample instants, length n \[rad/s\].
+    pub fn w(&self) -> &[f64] {
+        &self.aligned()[3]
+    }
+
+    /// Sample k (< n) of the aligned columns, [v_ref, w_ref, v, ω], computed from the recording
+    /// without making the columns: the values [`Conditioned::v_ref`] and the others hold.
+    pub fn aligned_sample(&self, k: usize) -> [f64; 4] {
+        [
+            self.v_ref_at(k),
+            self.w_ref_at(k),
+            self.v_at(k),
+            self.w_at(k),
+        ]
+    }
+
+    /// [`Conditioned::v_ref`]\[k\] without making the column.
+    #[inline]
+    pub fn v_ref_at(&self, k: usize) -> f64 {
+        align_command(&self.recording.v_ref, self.hold, k)
+    }
+
+    /// [`Conditioned::w_ref`]\[k\] without making the column.
+    #[inline]
+    pub fn w_ref_at(&self, k: usize) -> f64 {
+        align_command(&self.recording.w_ref, self.hold, k)
+    }
+
+    /// [`Conditioned::v`]\[k\] without making the column.
+    #[inline]
+    pub fn v_at(&self, k: usize) -> f64 {
+        align_measurement(&self.recording.v, self.sampling, k)
+    }
+
+    /// [`Conditioned::w`]\[k\] without making the column.
+    #[inline]
+    pub fn w_at(&self, k: usize) -> f64 {
+        align_measurement(&self.recording.w, self.sampling, k)
+    }
+
+    fn aligned(&self) -> &[Vec<f64>; 4] {
+        self.aligned.get_or_init(|| {
+            let n = self.len();
+            [
+                (0..n).map(|k| self.v_ref_at(k)).collect(),
+                (0..n).map(|k| self.w_ref_at(k)).collect(),
+                (0..n).map(|k| self.v_at(k)).collect(),
+                (0..n).map(|k| self.w_at(k)).collect(),
+            ]
+        })
+    }
+
+    /// [`crate::signal::sosfiltfilt_blocks`] with this recording's filter, the lookahead of
+    /// [`Conditioned::head_samples`] and `halo` neighbours a side: the S signals `inputs`
+    /// (sample k of each, k < n) filtered zero-phase and handed to `consume` block by block.
+    ///
+    /// # Errors
+    /// [`Error::TooShort`] naming the recording; the first error of `consume`.
+    pub fn smooth_blocks<const S: usize>(
+        &self,
+        inputs: [&(dyn Fn(usize) -> f64 + Sync); S],
+        halo: usize,
+        consume: impl FnMut(signal::FilteredBlock<'_, S>) -> Result<()>,
+    ) -> Result<()> {
+        let plan = signal::BlockPlan::for_lookahead(self.head_samples(), halo);
+        signal::sosfiltfilt_blocks(&self.sos, self.len(), inputs, plan, consume)
+            .map_err(|e| self.name_error(e))
     }
 
     /// Rows of the regression that are free of the filter's edge transients: the first and last
@@ -161,8 +245,10 @@ impl Conditioned<'_> {
     /// As [`Conditioned::smooth`].
     pub fn initial_state(&self) -> Result<[f64; 2]> {
         let head = self.head_samples().min(self.len());
+        // The head's aligned samples only: the whole columns are not made for this.
+        let (v, w): (Vec<f64>, Vec<f64>) = (0..head).map(|k| (self.v_at(k), self.w_at(k))).unzip();
         let [v, w]: [Vec<f64>; 2] = self
-            .smooth_all(&[&self.v[..head], &self.w[..head]])?
+            .smooth_all(&[&v, &w])?
             .try_into()
             .map_err(|_| Error::InvalidSetting("two smoothed signals".into()))?;
         Ok([v[0], w[0]])
@@ -330,7 +416,8 @@ fn cutoff_rule(recs: &[(&Recording, f64)]) -> Result<(f64, CutoffChoice)> {
         .iter()
         .map(|(r, _)| r.duration())
         .fold(f64::INFINITY, f64::min);
-    // The commands' spectra are independent: one per core.
+    // One spectrum at a time: a 1e6-sample command's transform holds ~24 MB while it runs,
+    // which two cores at once would double at the run's peak (the FFT itself takes ~20 ms).
     let columns: Vec<(&[f64], f64)> = recs
         .iter()
         .flat_map(|(r, dt)| {
@@ -338,13 +425,10 @@ fn cutoff_rule(recs: &[(&Recording, f64)]) -> Result<(f64, CutoffChoice)> {
             [(&r.v_ref[..], fs_r), (&r.w_ref[..], fs_r)]
         })
         .collect();
-    let f95 = {
-        use rayon::prelude::*;
-        columns
-            .par_iter()
-            .filter_map(|(col, fs_r)| signal::power_quantile_hz(col, *fs_r, 0.95))
-            .reduce_with(f64::max)
-    };
+    let f95 = columns
+        .iter()
+        .filter_map(|(col, fs_r)| signal::power_quantile_hz(col, *fs_r, 0.95))
+        .reduce(f64::max);
     let raw = f95.map_or(fs / 10.0, |f| 2.0 * f);
     let lo = (5.0 / t_min).min(fs / 5.0);
     let fc = raw.clamp(lo, fs / 5.0);
@@ -434,48 +518,39 @@ pub fn condition_uniform<'a>(
             ),
         });
     }
-    let align_cmd = |u: &[f64]| -> Vec<f64> {
-        match rec.command_hold() {
-            CommandHold::Sampled => u.to_vec(),
-            CommandHold::Zoh => (0..u.len())
-                .map(|k| {
-                    if k == 0 {
-                        u[0]
-                    } else {
-                        0.5 * (u[k - 1] + u[k])
-                    }
-                })
-                .collect(),
-        }
-    };
-    let align_meas = |m: &[f64]| -> Vec<f64> {
-        match rec.velocity_sampling() {
-            VelocitySampling::Instant => m.to_vec(),
-            VelocitySampling::WindowAverage => (0..m.len())
-                .map(|k| {
-                    if k + 1 < m.len() {
-                        0.5 * (m[k] + m[k + 1])
-                    } else {
-                        m[k]
-                    }
-                })
-                .collect(),
-        }
-    };
     Ok(Conditioned {
         source: rec.source.clone(),
         dt,
         resampled_from,
-        v_ref: align_cmd(&rec.v_ref),
-        w_ref: align_cmd(&rec.w_ref),
-        v: align_meas(&rec.v),
-        w: align_meas(&rec.w),
+        aligned: std::sync::OnceLock::new(),
+        hold: rec.command_hold(),
+        sampling: rec.velocity_sampling(),
         recording: rec,
         filter,
         sos,
         stencil: settings.stencil,
         edge_periods: settings.edge_periods,
     })
+}
+
+/// Command `u` at sample k aligned to the instant (module docs, step 2): a zero-order-held
+/// command's mean over the half periods around t_k, (u_{k−1} + u_k)/2 (u_0 at k = 0); a
+/// sampled command as it is.
+fn align_command(u: &[f64], hold: CommandHold, k: usize) -> f64 {
+    match hold {
+        CommandHold::Sampled => u[k],
+        CommandHold::Zoh if k == 0 => u[0],
+        CommandHold::Zoh => 0.5 * (u[k - 1] + u[k]),
+    }
+}
+
+/// Measurement `m` at sample k at the instant (module docs, step 2): window averages m_k over
+/// [t_{k−1}, t_k] become (m_k + m_{k+1})/2 (the last one kept); instant samples as they are.
+fn align_measurement(m: &[f64], sampling: VelocitySampling, k: usize) -> f64 {
+    match sampling {
+        VelocitySampling::WindowAverage if k + 1 < m.len() => 0.5 * (m[k] + m[k + 1]),
+        _ => m[k],
+    }
 }
 
 #[cfg(test)]
@@ -532,11 +607,11 @@ mod tests {
         let mut r = rec(40, 0.1);
         r.v_ref = (0..40).map(|k| k as f64).collect();
         let c = condition(&r, None, 1.0, &ConditionSettings::default()).expect("ok");
-        assert_eq!(c.v_ref[0], 0.0);
-        assert_eq!(c.v_ref[5], 4.5);
+        assert_eq!(c.v_ref()[0], 0.0);
+        assert_eq!(c.v_ref()[5], 4.5);
         r.set_meta("command_hold", "sampled");
         let c = condition(&r, None, 1.0, &ConditionSettings::default()).expect("ok");
-        assert_eq!(c.v_ref[5], 5.0);
+        assert_eq!(c.v_ref()[5], 5.0);
     }
 
     #[test]
@@ -573,7 +648,10 @@ mod tests {
             };
             let c = condition(&r, None, fc, &settings).expect("ok");
             assert!(c.head_samples() < 40_000, "{}", c.head_samples());
-            let whole = [c.smooth(&c.v).expect("v")[0], c.smooth(&c.w).expect("w")[0]];
+            let whole = [
+                c.smooth(c.v()).expect("v")[0],
+                c.smooth(c.w()).expect("w")[0],
+            ];
             let head = c.initial_state().expect("head");
             for (h, w) in head.iter().zip(whole) {
                 // Measured: 0 to 5e-15, 1.4e-13 for order 12 (the narrow filter's own rounding).

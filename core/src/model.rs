@@ -194,4 +194,22 @@ pub trait RegressorModel: DynamicModel {
     /// # Errors
     /// Conditioning errors (recording too short for the filter).
     fn regression(&self, data: &Conditioned<'_>) -> Result<Vec<ChannelRegression>>;
+
+    /// The rows of [`RegressorModel::regression`] handed to `sink` block by block, in order:
+    /// each call one block of consecutive rows, one [`ChannelRegression`] per channel (the
+    /// channels' blocks may differ in length). Stacked, the blocks are the whole regression.
+    /// A long recording's least squares runs on these (a QR factor updated block by block),
+    /// never holding a whole regressor. The default hands over the whole regression as one
+    /// block; the built-in eq. 2.19 models filter block by block
+    /// ([`Conditioned::smooth_blocks`]).
+    ///
+    /// # Errors
+    /// As [`RegressorModel::regression`]; the first error of `sink` (which ends the run).
+    fn regression_blocks(
+        &self,
+        data: &Conditioned<'_>,
+        sink: &mut dyn FnMut(Vec<ChannelRegression>) -> Result<()>,
+    ) -> Result<()> {
+        sink(self.regression(data)?)
+    }
 }

@@ -38,6 +38,8 @@ use sci_rs::signal::filter::sosfiltfilt_dyn;
 
 use crate::error::{Error, Result};
 
+mod blocks;
+pub use blocks::{BlockPlan, FilteredBlock, sosfiltfilt_blocks};
 pub use sci_rs::signal::filter::design::Sos;
 
 /// A Butterworth low-pass specification.
@@ -344,13 +346,13 @@ pub fn power_quantile_hz(x: &[f64], fs_hz: f64, fraction: f64) -> Option<f64> {
     r2c.process(&mut input, &mut spectrum).ok()?;
     drop(input);
     let half = n / 2;
-    let power: Vec<f64> = spectrum[1..=half].iter().map(|c| c.norm_sqr()).collect();
-    let total: f64 = power.iter().sum();
+    let power = || spectrum[1..=half].iter().map(|c| c.norm_sqr());
+    let total: f64 = power().sum();
     if total <= f64::MIN_POSITIVE * n as f64 || !total.is_finite() {
         return None;
     }
     let mut acc = 0.0;
-    for (k, p) in power.iter().enumerate() {
+    for (k, p) in power().enumerate() {
         acc += p;
         if acc >= fraction * total {
             return Some((k + 1) as f64 * fs_hz / n as f64);

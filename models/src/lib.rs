@@ -90,6 +90,13 @@ macro_rules! six_theta_model {
             fn regression(&self, data: &Conditioned<'_>) -> Result<Vec<ChannelRegression>> {
                 regressor::regression(data)
             }
+            fn regression_blocks(
+                &self,
+                data: &Conditioned<'_>,
+                sink: &mut dyn FnMut(Vec<ChannelRegression>) -> Result<()>,
+            ) -> Result<()> {
+                regressor::regression_blocks(data, sink)
+            }
         }
     };
 }

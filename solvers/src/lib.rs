@@ -14,7 +14,9 @@
 //! * [`iv`]: instrumental variables with instruments from the model's own noise-free
 //!   simulation, iterated — linear and fast;
 //!
-//! and one online estimator:
+//! least squares over a regression that arrives in blocks ([`streaming`]: a QR factor
+//! updated block by block, then a second pass for the Newey–West errors), and one online
+//! estimator:
 //! * [`recursive`]: recursive least squares with forgetting and a change detector — per
 //!   sample, no allocation.
 
@@ -23,12 +25,13 @@ pub mod iv;
 pub mod oe;
 mod ols;
 pub mod recursive;
+pub mod streaming;
 
 pub use boxls::BoxLs;
 
 pub use iv::{InstrumentalVariables, IvFit};
 pub use oe::{OutputError, OutputErrorFit};
-pub use ols::Ols;
+pub use ols::{NeweyWest, Ols};
 pub use recursive::{ChangeDetection, Rls, RlsSettings, RlsUpdate};
 
 /// Names of the built-in solvers.

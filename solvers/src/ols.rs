@@ -239,7 +239,30 @@ pub(crate) fn covariance(
     e: &DVector<f64>,
     lags: usize,
 ) -> DMatrix<f64> {
-    let (n, k) = (x.nrows(), d.sv.len());
+    let n = x.nrows();
+    let spread = if lags == 0 {
+        Spread::White(e.norm_squared())
+    } else {
+        // S_h over h_t = X̃_tᵀ e_t.
+        Spread::Meat(bartlett_meat_with(n, d.sv.len(), lags, |t, j| {
+            x[(t, j)] / d.scales[j] * e[t]
+        }))
+    };
+    covariance_of(d, n, spread)
+}
+
+/// What [`covariance_of`] needs of the residuals.
+pub(crate) enum Spread {
+    /// Independent residuals: their sum of squares (RSS).
+    White(f64),
+    /// Correlated residuals: the Newey–West meat S_h (k × k) of h_t = X̃_tᵀ e_t.
+    Meat(DMatrix<f64>),
+}
+
+/// [`covariance`] from the decomposition of X (n rows) and the residuals' [`Spread`]:
+/// σ̂² H⁻¹ with σ̂² = RSS/(n − k), or the sandwich D⁻¹ H̃⁻¹ S_h H̃⁻¹ D⁻¹ · n/(n − k).
+pub(crate) fn covariance_of(d: &Decomposition, n: usize, spread: Spread) -> DMatrix<f64> {
+    let k = d.sv.len();
     let dof = (n - k).max(1) as f64;
     // A = D⁻¹ V Σ⁻¹ (k × k): Cov = A Sᵤ Aᵀ with Sᵤ the meat in U coordinates.
     let mut a = d.v_t.transpose();
@@ -249,17 +272,18 @@ pub(crate) fn covariance(
     for (i, mut r) in a.row_iter_mut().enumerate() {
         r /= d.scales[i];
     }
-    if lags == 0 {
-        return &a * a.transpose() * (e.norm_squared() / dof);
+    match spread {
+        Spread::White(rss) => &a * a.transpose() * (rss / dof),
+        Spread::Meat(meat_h) => {
+            // Sᵤ = Σ⁻¹ Vᵀ S_h V Σ⁻¹.
+            let mut b = d.v_t.clone();
+            for (i, mut r) in b.row_iter_mut().enumerate() {
+                r /= d.sv[i];
+            }
+            let meat_u = &b * meat_h * b.transpose() * (n as f64 / dof);
+            &a * meat_u * a.transpose()
+        }
     }
-    // Sᵤ = Σ⁻¹ Vᵀ S_h V Σ⁻¹ with S_h over h_t = X̃_tᵀ e_t.
-    let meat_h = bartlett_meat_with(n, k, lags, |t, j| x[(t, j)] / d.scales[j] * e[t]);
-    let mut b = d.v_t.clone();
-    for (i, mut r) in b.row_iter_mut().enumerate() {
-        r /= d.sv[i];
-    }
-    let meat_u = &b * meat_h * b.transpose() * (n as f64 / dof);
-    &a * meat_u * a.transpose()
 }
 
 /// The Newey–West meat Σ_{|l| ≤ L} (1 − |l|/(L+1)) Σ_t g_t g_{t+l}ᵀ (k × k) of the rows g_t
@@ -270,43 +294,97 @@ pub(crate) fn bartlett_meat(g: &DMatrix<f64>, lags: usize) -> DMatrix<f64> {
 }
 
 /// [`bartlett_meat`] of the rows g_t that `g(t, out)` writes (k values each, t < n), each
-/// computed once: the last L + 1 are kept to leave the moving window.
+/// computed once: the last L + 1 are kept to leave the moving window ([`NeweyWest`]).
 pub(crate) fn bartlett_meat_rows(
     n: usize,
     k: usize,
     lags: usize,
     mut g: impl FnMut(usize, &mut [f64]),
 ) -> DMatrix<f64> {
-    let mut ring = vec![0.0; (lags + 1) * k];
-    let mut m = DMatrix::<f64>::zeros(k, k);
-    let mut window = vec![0.0; k];
-    for enter in 0..n + lags {
-        let slot = enter % (lags + 1);
-        // The slot held row enter − (L + 1), which leaves the window now.
-        if enter > lags {
-            for (b, x) in window.iter_mut().zip(&ring[slot * k..(slot + 1) * k]) {
+    let mut nw = NeweyWest::new(k, lags);
+    let mut row = vec![0.0; k];
+    for t in 0..n {
+        g(t, &mut row);
+        nw.push(&row);
+    }
+    nw.finish()
+}
+
+/// The Newey–West meat of the module doc, Σ_{|l| ≤ L} (1 − |l|/(L+1)) Σ_t g_t g_{t+l}ᵀ (k × k),
+/// over rows g_t pushed one at a time in order, by the moving sums B_s of L + 1 rows: it keeps
+/// the last L + 1 rows and nothing else, so the rows can come from a pass over data never
+/// held whole.
+#[derive(Debug, Clone)]
+pub struct NeweyWest {
+    k: usize,
+    lags: usize,
+    /// The last L + 1 rows, row t in slot t mod (L + 1).
+    ring: Vec<f64>,
+    /// B: the sum of the rows in the window.
+    window: Vec<f64>,
+    /// Σ_s B_s B_sᵀ so far (upper triangle).
+    m: DMatrix<f64>,
+    /// Rows pushed.
+    entered: usize,
+}
+
+impl NeweyWest {
+    /// An empty sum for rows of `k` values and `lags` lags (L; 0: the plain Σ g_t g_tᵀ).
+    pub fn new(k: usize, lags: usize) -> Self {
+        Self {
+            k,
+            lags,
+            ring: vec![0.0; (lags + 1) * k],
+            window: vec![0.0; k],
+            m: DMatrix::zeros(k, k),
+            entered: 0,
+        }
+    }
+
+    /// Adds row g_t (its first k values; t is the count of rows pushed before).
+    pub fn push(&mut self, g: &[f64]) {
+        let k = self.k;
+        let slot = self.entered % (self.lags + 1);
+        let old = &mut self.ring[slot * k..(slot + 1) * k];
+        // The slot held row t − (L + 1), which leaves the window now (zero before it filled).
+        for ((b, x), new) in self.window.iter_mut().zip(old.iter_mut()).zip(&g[..k]) {
+            *b += new - *x;
+            *x = *new;
+        }
+        self.entered += 1;
+        self.accumulate();
+    }
+
+    fn accumulate(&mut self) {
+        for a in 0..self.k {
+            for b in a..self.k {
+                self.m[(a, b)] += self.window[a] * self.window[b];
+            }
+        }
+    }
+
+    /// The meat (k × k, symmetric): the window slides L steps past the last row first (a
+    /// slot not filled yet holds zeros).
+    pub fn finish(mut self) -> DMatrix<f64> {
+        let k = self.k;
+        for step in 0..self.lags {
+            let slot = (self.entered + step) % (self.lags + 1);
+            for (b, x) in self
+                .window
+                .iter_mut()
+                .zip(&self.ring[slot * k..(slot + 1) * k])
+            {
                 *b -= x;
             }
-        }
-        if enter < n {
-            let row = &mut ring[slot * k..(slot + 1) * k];
-            g(enter, row);
-            for (b, x) in window.iter_mut().zip(row.iter()) {
-                *b += x;
-            }
+            self.accumulate();
         }
         for a in 0..k {
-            for b in a..k {
-                m[(a, b)] += window[a] * window[b];
+            for b in 0..a {
+                self.m[(a, b)] = self.m[(b, a)];
             }
         }
+        self.m / (self.lags + 1) as f64
     }
-    for a in 0..k {
-        for b in 0..a {
-            m[(a, b)] = m[(b, a)];
-        }
-    }
-    m / (lags + 1) as f64
 }
 
 /// [`bartlett_meat`] of the rows g_t[j] = `g(t, j)`, t < n, j < k, never stored (each value

@@ -374,7 +374,7 @@ fn accelerations(recs: &[Recording], settings: &DiagnoseSettings) -> (Outputs, [
                 floor.add(c, r);
             }
             let d =
-                c.and_then(|c| Some([c.differentiate(&c.v).ok()?, c.differentiate(&c.w).ok()?]));
+                c.and_then(|c| Some([c.differentiate(c.v()).ok()?, c.differentiate(c.w()).ok()?]));
             d.unwrap_or_else(|| [vec![0.0; r.len()], vec![0.0; r.len()]])
         })
         .collect();

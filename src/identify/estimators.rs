@@ -5,10 +5,14 @@
 
 use std::time::Instant;
 
+use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
 use wheelid_core::{
     BoundState, ChannelRegression, Estimate, Estimator, EstimatorInput, LinearFit, LinearProblem,
-    RegressorModel, SolveStatus, Solver, metrics,
+    RegressorModel, SolveError, SolveStatus, Solver,
 };
+use wheelid_solvers::NeweyWest;
+use wheelid_solvers::streaming::{self, QrRows};
 
 use super::prepare::Prepared;
 use super::{EstimateReport, IdentifyError, IdentifySettings};
@@ -30,7 +34,11 @@ pub(super) struct LeastSquares {
 pub(super) const PLOT_ROWS: usize = 20_000;
 
 /// Builds each recording's regression (eq. 4.2), stacks them per channel and solves each
-/// channel with `solver` (eq. 4.3–4.7, within `settings.bounds` when given).
+/// channel with `solver` (eq. 4.3–4.7, within `settings.bounds` when given), in two passes
+/// over the model's regression blocks ([`RegressorModel::regression_blocks`]) that never hold
+/// a whole regressor (`wheelid_solvers::streaming`): the first compresses each channel's
+/// rows into their QR factor, which the solver solves; the second, with θ̂, sums the
+/// residuals' Newey–West meat, R² and the rows kept for the plots.
 ///
 /// # Errors
 /// [`IdentifyError::Core`] from the model's regression, [`IdentifyError::Solve`] naming the
@@ -41,61 +49,42 @@ pub(super) fn least_squares(
     data: &Prepared<'_>,
     settings: &IdentifySettings,
 ) -> Result<LeastSquares, IdentifyError> {
-    let per_file: Vec<Vec<ChannelRegression>> = data
-        .conditioned
-        .iter()
-        .map(|c| model.regression(c))
-        .collect::<Result<_, _>>()?;
-    let regressions = ChannelRegression::stack(per_file);
+    let clock = Instant::now();
+    let mut channels = compress(model, data)?;
     let p = model.params().len();
     let names: Vec<&str> = model.params().iter().map(|q| q.name).collect();
+    // The channels' compressed problems are independent and tiny.
+    let mut fits = Vec::with_capacity(channels.len());
+    for ch in &channels {
+        fits.push(solve_compressed(solver, ch, &names, settings)?);
+    }
+    let thetas: Vec<DVector<f64>> = fits.iter().map(|f| f.theta.clone()).collect();
+    let spreads = spread(model, data, &mut channels, &thetas)?;
     let mut theta = vec![0.0; p];
     let mut std_err = vec![0.0; p];
     let mut bound_state = vec![BoundState::Free; p];
-    let clock = Instant::now();
-    // The channels' problems are independent: solved at once, on the available cores.
-    let solve = |reg: &ChannelRegression| -> Result<(LinearFit, (f64, f64, usize)), IdentifyError> {
-        let ch_names: Vec<&str> = reg.params.iter().map(|&i| names[i]).collect();
-        let ch_bounds: Option<Vec<(f64, f64)>> = settings
-            .bounds
-            .as_ref()
-            .map(|b| reg.params.iter().map(|&i| b[i]).collect());
-        let problem = LinearProblem {
-            x: &reg.x,
-            y: &reg.y,
-            names: &ch_names,
-            bounds: ch_bounds.as_deref(),
-            correlation_lags: data.lags,
-        };
-        let fit = solver
-            .solve(&problem)
-            .map_err(|source| IdentifyError::Solve {
-                channel: reg.channel.into(),
-                source,
-            })?;
-        let yhat = &reg.x * &fit.theta;
-        let quality = (
-            metrics::r_squared(reg.y.as_slice(), yhat.as_slice()),
-            fit.condition_number,
-            reg.y.len(),
-        );
-        Ok((fit, quality))
-    };
-    let fits: Vec<(LinearFit, (f64, f64, usize))> = {
-        use rayon::prelude::*;
-        regressions
-            .par_iter()
-            .map(solve)
-            .collect::<Result<_, _>>()?
-    };
     let mut quality = Vec::with_capacity(fits.len());
-    for (reg, (fit, q)) in regressions.iter().zip(fits) {
-        for (j, &i) in reg.params.iter().enumerate() {
+    for ((ch, fit), sp) in channels.iter().zip(&fits).zip(spreads) {
+        let ch_names: Vec<&str> = ch.params.iter().map(|&i| names[i]).collect();
+        let (xc, _) = ch.qr.compressed();
+        let meat = (data.lags > 0).then_some(sp.meat);
+        let cov = streaming::covariance(&xc, ch.qr.rows(), &ch_names, meat, sp.rss).map_err(
+            |source| IdentifyError::Solve {
+                channel: ch.name.into(),
+                source,
+            },
+        )?;
+        for (j, &i) in ch.params.iter().enumerate() {
             theta[i] = fit.theta[j];
-            std_err[i] = fit.std_err[j];
+            std_err[i] = cov[(j, j)].max(0.0).sqrt();
             bound_state[i] = fit.bound_state[j];
         }
-        quality.push(q);
+        let r2 = if sp.tss > 0.0 {
+            1.0 - sp.rss / sp.tss
+        } else {
+            f64::NAN
+        };
+        quality.push((r2, fit.condition_number, ch.qr.rows()));
     }
     Ok(LeastSquares {
         report: EstimateReport {
@@ -109,11 +98,229 @@ pub(super) fn least_squares(
             seconds: clock.elapsed().as_secs_f64(),
         },
         quality,
-        regressions: regressions
+        regressions: channels
             .into_iter()
-            .map(|r| r.thinned(PLOT_ROWS))
+            .map(|c| c.plot.into_regression())
             .collect(),
     })
+}
+
+/// One channel's rows in pass 1: its QR factor, the sum of its regressand, and the rows kept
+/// for the plots.
+struct Channel {
+    name: &'static str,
+    params: Vec<usize>,
+    qr: QrRows,
+    sum_y: f64,
+    plot: PlotRows,
+}
+
+/// Pass 1: every recording's regression blocks into each channel's QR factor.
+///
+/// # Errors
+/// As [`least_squares`].
+fn compress(
+    model: &dyn RegressorModel,
+    data: &Prepared<'_>,
+) -> Result<Vec<Channel>, IdentifyError> {
+    // Rows expected (the eq. 2.19 models' count; a plugin's may differ, which only changes
+    // how many rows the plots keep).
+    let expected: usize = data.conditioned.iter().map(|c| c.valid_range().len()).sum();
+    let step = expected.div_ceil(PLOT_ROWS).max(1);
+    let mut channels: Vec<Channel> = Vec::new();
+    let mut failed: Option<IdentifyError> = None;
+    for c in &data.conditioned {
+        model
+            .regression_blocks(c, &mut |blocks| {
+                if channels.is_empty() {
+                    channels = blocks
+                        .iter()
+                        .map(|b| Channel {
+                            name: b.channel,
+                            params: b.params.clone(),
+                            qr: QrRows::new(b.x.ncols()),
+                            sum_y: 0.0,
+                            plot: PlotRows::new(b, step),
+                        })
+                        .collect();
+                }
+                let pushed =
+                    channels
+                        .par_iter_mut()
+                        .zip(blocks.par_iter())
+                        .try_for_each(|(ch, b)| {
+                            ch.qr
+                                .push(&b.x, &b.y)
+                                .map_err(|source| IdentifyError::Solve {
+                                    channel: ch.name.into(),
+                                    source,
+                                })?;
+                            ch.sum_y += b.y.sum();
+                            ch.plot.take(b);
+                            Ok(())
+                        });
+                pushed.map_err(|e: IdentifyError| {
+                    let message = e.to_string();
+                    failed = Some(e);
+                    wheelid_core::Error::InvalidSetting(message)
+                })
+            })
+            .map_err(|e| failed.take().unwrap_or(IdentifyError::Core(e)))?;
+    }
+    Ok(channels)
+}
+
+/// Solves one channel's compressed problem with `solver` (its errors are not the data's:
+/// [`spread`] gives those).
+///
+/// # Errors
+/// [`IdentifyError::Solve`] naming the channel.
+fn solve_compressed(
+    solver: &dyn Solver,
+    ch: &Channel,
+    names: &[&str],
+    settings: &IdentifySettings,
+) -> Result<LinearFit, IdentifyError> {
+    let fail = |source| IdentifyError::Solve {
+        channel: ch.name.into(),
+        source,
+    };
+    let k = ch.params.len();
+    if ch.qr.rows() <= k {
+        return Err(fail(SolveError::InvalidProblem(format!(
+            "{} samples cannot determine {k} parameters",
+            ch.qr.rows()
+        ))));
+    }
+    let ch_names: Vec<&str> = ch.params.iter().map(|&i| names[i]).collect();
+    let ch_bounds: Option<Vec<(f64, f64)>> = settings
+        .bounds
+        .as_ref()
+        .map(|b| ch.params.iter().map(|&i| b[i]).collect());
+    let (x, y) = ch.qr.compressed();
+    let problem = LinearProblem {
+        x: &x,
+        y: &y,
+        names: &ch_names,
+        bounds: ch_bounds.as_deref(),
+        correlation_lags: 0,
+    };
+    solver.solve(&problem).map_err(fail)
+}
+
+/// Pass 2's sums for one channel at θ̂.
+struct Spread {
+    /// Newey–West meat of h_t = X̃_tᵀ e_t (the columns scaled by their norms).
+    meat: DMatrix<f64>,
+    /// Σ e_t².
+    rss: f64,
+    /// Σ (y_t − ȳ)².
+    tss: f64,
+}
+
+/// Pass 2: the residuals at each channel's θ̂ (`thetas`, in channel order), summed into
+/// [`Spread`]s, and the plot rows' fitted values.
+///
+/// # Errors
+/// As [`least_squares`].
+fn spread(
+    model: &dyn RegressorModel,
+    data: &Prepared<'_>,
+    channels: &mut [Channel],
+    thetas: &[DVector<f64>],
+) -> Result<Vec<Spread>, IdentifyError> {
+    struct Pass2 {
+        scales: Vec<f64>,
+        mean: f64,
+        nw: NeweyWest,
+        rss: f64,
+        tss: f64,
+        row: Vec<f64>,
+    }
+    let mut sums: Vec<Pass2> = channels
+        .iter()
+        .map(|ch| {
+            let k = ch.params.len();
+            Pass2 {
+                scales: streaming::column_norms(&ch.qr.compressed().0),
+                mean: ch.sum_y / ch.qr.rows().max(1) as f64,
+                nw: NeweyWest::new(k, data.lags),
+                rss: 0.0,
+                tss: 0.0,
+                row: vec![0.0; k],
+            }
+        })
+        .collect();
+    for c in &data.conditioned {
+        model.regression_blocks(c, &mut |blocks| {
+            sums.par_iter_mut()
+                .zip(blocks.par_iter())
+                .zip(thetas.par_iter())
+                .for_each(|((s, b), theta)| {
+                    let e = &b.y - &b.x * theta;
+                    for (t, &et) in e.iter().enumerate() {
+                        s.rss += et * et;
+                        s.tss += (b.y[t] - s.mean).powi(2);
+                        for (j, h) in s.row.iter_mut().enumerate() {
+                            *h = b.x[(t, j)] / s.scales[j] * et;
+                        }
+                        s.nw.push(&s.row);
+                    }
+                });
+            Ok(())
+        })?;
+    }
+    Ok(sums
+        .into_iter()
+        .map(|s| Spread {
+            meat: s.nw.finish(),
+            rss: s.rss,
+            tss: s.tss,
+        })
+        .collect())
+}
+
+/// Every `step`-th row of a channel's stacked regression, for the plots.
+struct PlotRows {
+    channel: &'static str,
+    params: Vec<usize>,
+    step: usize,
+    /// Rows seen so far (of the whole stacked regression).
+    seen: usize,
+    x: Vec<f64>,
+    y: Vec<f64>,
+}
+
+impl PlotRows {
+    fn new(proto: &ChannelRegression, step: usize) -> Self {
+        Self {
+            channel: proto.channel,
+            params: proto.params.clone(),
+            step,
+            seen: 0,
+            x: Vec::new(),
+            y: Vec::new(),
+        }
+    }
+
+    fn take(&mut self, b: &ChannelRegression) {
+        let first = (self.step - self.seen % self.step) % self.step;
+        for t in (first..b.y.len()).step_by(self.step) {
+            self.x.extend(b.x.row(t).iter());
+            self.y.push(b.y[t]);
+        }
+        self.seen += b.y.len();
+    }
+
+    fn into_regression(self) -> ChannelRegression {
+        let (m, k) = (self.y.len(), self.params.len());
+        ChannelRegression {
+            channel: self.channel,
+            params: self.params,
+            x: DMatrix::from_row_slice(m, k, &self.x),
+            y: DVector::from_vec(self.y),
+        }
+    }
 }
 
 /// Runs `estimator` on the prepared data from least squares' `ls_theta`, and times it.

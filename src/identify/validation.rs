@@ -88,14 +88,14 @@ fn validate(
     } = run;
     let mut outputs = outputs.map(Vec::into_iter);
     let nch = model.channels().len();
-    let mut series = Vec::new();
     let mut files = Vec::new();
-    // Samples left out at each file's start (see `skip` below).
-    let mut skips = Vec::new();
+    // Per file: its recording, the samples left out at its start (see `skip` below) and its
+    // simulation.
+    let mut runs: Vec<(&Recording, usize, wheelid_core::Simulation)> = Vec::new();
     let offset_params = CommandOffset::params_of(model);
     let with_offset = CommandOffset::new(model, &offset_params)?;
     for ((c, x0), rec) in conditioned.iter().zip(initial).zip(recordings) {
-        let measured = vec![rec.v.clone(), rec.w.clone()];
+        let measured = [&rec.v, &rec.w];
         let x0_estimated = x0.is_some();
         let initial = match x0 {
             Some(x) => x,
@@ -119,7 +119,6 @@ fn validate(
         let fits: Vec<f64> = (0..nch)
             .map(|ch| metrics::fit_percent(&measured[ch][skip..], &simulated[ch][skip..]))
             .collect();
-        skips.push(skip);
         files.push(FileReport {
             source: c.source.clone(),
             samples: rec.len(),
@@ -128,12 +127,7 @@ fn validate(
             fit_percent: fits,
             initial,
         });
-        series.push(FileSeries {
-            source: c.source.clone(),
-            t: rec.t.clone(),
-            measured,
-            simulated,
-        });
+        runs.push((rec, skip, simulated));
     }
     let channels: Vec<ChannelReport> = model
         .channels()
@@ -144,15 +138,19 @@ fn validate(
             name: info.name.into(),
             r2,
             fit_percent: metrics::fit_percent_parts(
-                &series
+                &runs
                     .iter()
-                    .zip(&skips)
-                    .map(|(s, &k)| (&s.measured[ch][k..], &s.simulated[ch][k..]))
+                    .map(|(rec, k, sim)| (&[&rec.v, &rec.w][ch][*k..], &sim[ch][*k..]))
                     .collect::<Vec<_>>(),
             ),
             condition_number: cond,
             samples: n,
         })
+        .collect();
+    let series = conditioned
+        .iter()
+        .zip(runs)
+        .map(|(c, (rec, _, sim))| FileSeries::thinned(c.source.clone(), rec, sim))
         .collect();
     Ok(Validation {
         files,

@@ -224,20 +224,20 @@ pub fn simulate(theta: &[f64], rec: &Recording, initial: &[f64]) -> Result<[Vec<
 pub fn regression(data: &Conditioned<'_>) -> Result<Vec<ChannelRegression>> {
     let keep = data.valid_range();
     let n = keep.len();
-    let vf = data.smooth(&data.v)?;
-    let wf = data.smooth(&data.w)?;
+    let vf = data.smooth(data.v())?;
+    let wf = data.smooth(data.w())?;
     let dv = data.differentiate(&vf)?;
     let dw = data.differentiate(&wf)?;
-    let w2: Vec<f64> = data.w.iter().map(|w| -w * w).collect();
-    let vw: Vec<f64> = data.v.iter().zip(&data.w).map(|(v, w)| v * w).collect();
-    let sv: Vec<f64> = data.v.iter().map(|&v| sgn(v, FRICTION_EPS[0])).collect();
-    let sw: Vec<f64> = data.w.iter().map(|&w| sgn(w, FRICTION_EPS[1])).collect();
+    let w2: Vec<f64> = data.w().iter().map(|w| -w * w).collect();
+    let vw: Vec<f64> = data.v().iter().zip(data.w()).map(|(v, w)| v * w).collect();
+    let sv: Vec<f64> = data.v().iter().map(|&v| sgn(v, FRICTION_EPS[0])).collect();
+    let sw: Vec<f64> = data.w().iter().map(|&w| sgn(w, FRICTION_EPS[1])).collect();
     let w2f = data.smooth(&w2)?;
     let vwf = data.smooth(&vw)?;
     let svf = data.smooth(&sv)?;
     let swf = data.smooth(&sw)?;
-    let yv = data.smooth(&data.v_ref)?;
-    let yw = data.smooth(&data.w_ref)?;
+    let yv = data.smooth(data.v_ref())?;
+    let yw = data.smooth(data.w_ref())?;
     let mat = |cols: [&Vec<f64>; 4]| DMatrix::from_fn(n, 4, |i, j| cols[j][keep.start + i]);
     let kept = |y: &[f64]| DVector::from_column_slice(&y[keep.clone()]);
     Ok(vec![

@@ -1,0 +1,223 @@
+//! Least squares over rows that arrive in blocks: a long recording's regression, built block
+//! by block, solved without ever holding it.
+//!
+//! **Pass 1, compression.** [X | y] (n × (k+1)) = Q R with R upper triangular ((k+1) × (k+1)),
+//! updated block by block: [R; X_b | y_b] = Q′ R′ (Householder QR of the stacked rows, a
+//! row-blocked TSQR as in [`crate::Ols`]). With R_x = R[:, :k] and r_y = R[:, k], for every θ
+//!
+//! ```text
+//! ‖y − Xθ‖ = ‖Qᵀ(y − Xθ)‖ = ‖r_y − R_x θ‖
+//! ```
+//!
+//! so the (k+1)-row problem (R_x, r_y) has the same least-squares and bounded least-squares
+//! solutions as the n-row one, the same column norms, singular values, condition number and
+//! rank, and the same residual sum of squares: any [`wheelid_core::Solver`] solves it in place of
+//! the whole problem ([`QrRows::compressed`]).
+//!
+//! **Pass 2, standard errors.** The residuals are gone from the compressed problem, and with
+//! them what a solver's standard errors need; with θ̂ known, a second pass over the same rows
+//! gives e_t = y_t − X_t θ̂ and the Newey–West meat of h_t = X̃_tᵀ e_t (X̃ = X D⁻¹, D the
+//! column norms) row by row ([`crate::ols::NeweyWest`], L + 1 rows held), and
+//! [`covariance`] forms Cov(θ̂) = D⁻¹ H̃⁻¹ S_h H̃⁻¹ D⁻¹ · n/(n − k), H̃ = R̃ᵀR̃ — what
+//! [`crate::Ols`] computes from the whole X (test).
+
+use nalgebra::{DMatrix, DVector};
+use wheelid_core::{LinearProblem, SolveError};
+
+use crate::ols::{self, Spread};
+
+/// Rows per Householder step of [`QrRows::push`].
+const QR_CHUNK: usize = 4096;
+
+/// Pass 1: the triangular factor of [X | y] over the rows pushed so far.
+#[derive(Debug, Clone)]
+pub struct QrRows {
+    k: usize,
+    /// R, at most (k+1) × (k+1).
+    r: DMatrix<f64>,
+    n: usize,
+}
+
+impl QrRows {
+    /// No rows yet, for `k` regressors.
+    pub fn new(k: usize) -> Self {
+        Self {
+            k,
+            r: DMatrix::zeros(0, k + 1),
+            n: 0,
+        }
+    }
+
+    /// Rows pushed.
+    pub fn rows(&self) -> usize {
+        self.n
+    }
+
+    /// Adds the rows of `x` (m × k) and `y` (m).
+    ///
+    /// # Errors
+    /// [`SolveError::InvalidProblem`] for shapes that disagree or a non-finite value.
+    pub fn push(&mut self, x: &DMatrix<f64>, y: &DVector<f64>) -> Result<(), SolveError> {
+        let (m, k) = x.shape();
+        if k != self.k || y.len() != m {
+            return Err(SolveError::InvalidProblem(format!(
+                "a block of {m} × {k} regressors and {} values, for {} regressors",
+                y.len(),
+                self.k
+            )));
+        }
+        if x.iter().chain(y.iter()).any(|v| !v.is_finite()) {
+            return Err(SolveError::InvalidProblem(
+                "X or y has a non-finite value".into(),
+            ));
+        }
+        let mut start = 0;
+        while start < m {
+            let len = QR_CHUNK.min(m - start);
+            let top = self.r.nrows();
+            let mut stacked = DMatrix::<f64>::zeros(top + len, k + 1);
+            stacked.view_mut((0, 0), (top, k + 1)).copy_from(&self.r);
+            stacked
+                .view_mut((top, 0), (len, k))
+                .copy_from(&x.view((start, 0), (len, k)));
+            stacked
+                .view_mut((top, k), (len, 1))
+                .copy_from(&y.rows(start, len));
+            self.r = stacked.qr().r();
+            start += len;
+        }
+        self.n += m;
+        Ok(())
+    }
+
+    /// The equivalent (k+1)-row problem (R_x, r_y) of the module doc (zero rows where fewer
+    /// than k + 1 rows were pushed).
+    pub fn compressed(&self) -> (DMatrix<f64>, DVector<f64>) {
+        let k = self.k;
+        let mut r = DMatrix::zeros(k + 1, k + 1);
+        r.view_mut((0, 0), self.r.shape()).copy_from(&self.r);
+        (r.columns(0, k).into_owned(), r.column(k).into_owned())
+    }
+}
+
+/// Cov(θ̂) (k × k) of least squares on `n` rows whose compressed problem is `x_compressed`
+/// ((k+1) × k, [`QrRows::compressed`]), from pass 2's Newey–West meat `meat_h` of
+/// h_t = X̃_tᵀ e_t with X̃ = X D⁻¹, D = [`column_norms`] (`lags` > 0), or from the residual sum
+/// of squares `rss` (`lags` = 0): the covariance [`crate::Ols`] gives the whole problem.
+///
+/// # Errors
+/// [`SolveError::RankDeficient`] or [`SolveError::Numerical`] as [`crate::Ols`] would give.
+pub fn covariance(
+    x_compressed: &DMatrix<f64>,
+    n: usize,
+    names: &[&str],
+    meat_h: Option<DMatrix<f64>>,
+    rss: f64,
+) -> Result<DMatrix<f64>, SolveError> {
+    let y = DVector::zeros(x_compressed.nrows());
+    let p = LinearProblem {
+        x: x_compressed,
+        y: &y,
+        names,
+        bounds: None,
+        correlation_lags: 0,
+    };
+    let d = ols::decompose(&p, crate::Ols::default().rank_tol)?;
+    let spread = match meat_h {
+        Some(m) => Spread::Meat(m),
+        None => Spread::White(rss),
+    };
+    Ok(ols::covariance_of(&d, n, spread))
+}
+
+/// The column norms D of X from its compressed problem (k; 1 for a zero column, as
+/// [`crate::Ols`] scales): pass 2 scales its rows by them.
+pub fn column_norms(x_compressed: &DMatrix<f64>) -> Vec<f64> {
+    ols::column_scales(x_compressed).iter().copied().collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::Ols;
+    use approx::assert_relative_eq;
+    use wheelid_core::Solver;
+
+    /// 30,011 rows pushed in uneven blocks: θ from the compressed problem and the two-pass
+    /// Newey–West covariance equal `Ols` on the whole problem.
+    #[test]
+    fn two_passes_over_blocks_equal_ols_on_the_whole_problem() {
+        let n = 30_011;
+        let x = DMatrix::from_fn(n, 3, |t, j| {
+            let s = t as f64 * 1e-3;
+            match j {
+                0 => 1e3 * (s.sin() + 1e-4 * (7.3 * s).cos()),
+                1 => 1e3 * s.sin() + 0.3 * (3.1 * s).sin(),
+                _ => 1e-2 * (0.7 * s).cos(),
+            }
+        });
+        let noise = DVector::from_fn(n, |t, _| ((t * 7919) % 1009) as f64 / 1009.0 - 0.5);
+        let y = &x * DVector::from_vec(vec![0.5, -1.5, 40.0]) + &noise;
+        let names = ["a", "b", "c"];
+        for lags in [0usize, 12] {
+            let whole = Ols::default()
+                .solve(&LinearProblem {
+                    x: &x,
+                    y: &y,
+                    names: &names,
+                    bounds: None,
+                    correlation_lags: lags,
+                })
+                .expect("solves");
+            let cuts = [0, 5, 4_100, 9_000, 30_000, n];
+            let mut qr = QrRows::new(3);
+            for w in cuts.windows(2) {
+                let rows: Vec<usize> = (w[0]..w[1]).collect();
+                qr.push(&x.select_rows(&rows), &y.select_rows(&rows))
+                    .expect("finite");
+            }
+            assert_eq!(qr.rows(), n);
+            let (xc, yc) = qr.compressed();
+            let fit = Ols::default()
+                .solve(&LinearProblem {
+                    x: &xc,
+                    y: &yc,
+                    names: &names,
+                    bounds: None,
+                    correlation_lags: 0,
+                })
+                .expect("solves");
+            // Both are rounding away from the exact θ by up to cond(X̃)·ε·‖θ‖ (cond ≈ 1e5).
+            assert_relative_eq!(fit.theta, whole.theta, max_relative = 1e-8);
+            assert_relative_eq!(fit.rss, whole.rss, max_relative = 1e-8);
+            assert_relative_eq!(
+                fit.condition_number,
+                whole.condition_number,
+                max_relative = 1e-10
+            );
+            // Pass 2.
+            let d = column_norms(&xc);
+            let mut nw = ols::NeweyWest::new(3, lags);
+            let mut rss = 0.0;
+            for t in 0..n {
+                let e = y[t] - (0..3).map(|j| x[(t, j)] * fit.theta[j]).sum::<f64>();
+                rss += e * e;
+                let h: Vec<f64> = (0..3).map(|j| x[(t, j)] / d[j] * e).collect();
+                nw.push(&h);
+            }
+            let meat = (lags > 0).then(|| nw.finish());
+            let cov = covariance(&xc, n, &names, meat, rss).expect("full rank");
+            assert_relative_eq!(cov, whole.covariance, max_relative = 1e-7);
+        }
+    }
+
+    #[test]
+    fn a_bad_block_is_an_error() {
+        let mut qr = QrRows::new(2);
+        let x = DMatrix::from_element(3, 2, 1.0);
+        assert!(qr.push(&x, &DVector::from_element(2, 1.0)).is_err());
+        let y = DVector::from_vec(vec![1.0, f64::NAN, 0.0]);
+        assert!(qr.push(&x, &y).is_err());
+        assert_eq!(qr.rows(), 0);
+    }
+}
