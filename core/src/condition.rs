@@ -182,13 +182,14 @@ impl Conditioned<'_> {
 
     /// [`crate::signal::sosfiltfilt_blocks`] with this recording's filter, the lookahead of
     /// [`Conditioned::head_samples`] and `halo` neighbours a side: the S signals `inputs`
-    /// (sample k of each, k < n) filtered zero-phase and handed to `consume` block by block.
+    /// (each filling the samples asked for, [`signal::BlockInput`]) filtered zero-phase and
+    /// handed to `consume` block by block.
     ///
     /// # Errors
     /// [`Error::TooShort`] naming the recording; the first error of `consume`.
     pub fn smooth_blocks<const S: usize>(
         &self,
-        inputs: [&(dyn Fn(usize) -> f64 + Sync); S],
+        inputs: [signal::BlockInput<'_>; S],
         halo: usize,
         consume: impl FnMut(signal::FilteredBlock<'_, S>) -> Result<()>,
     ) -> Result<()> {

@@ -39,7 +39,7 @@ use sci_rs::signal::filter::sosfiltfilt_dyn;
 use crate::error::{Error, Result};
 
 mod blocks;
-pub use blocks::{BlockPlan, FilteredBlock, sosfiltfilt_blocks};
+pub use blocks::{BlockInput, BlockPlan, FilteredBlock, sosfiltfilt_blocks};
 pub use sci_rs::signal::filter::design::Sos;
 
 /// A Butterworth low-pass specification.

@@ -74,6 +74,15 @@ pub fn regression(data: &Conditioned<'_>) -> Result<Vec<ChannelRegression>> {
     Ok(ChannelRegression::stack(blocks))
 }
 
+/// A block input ([`wheelid_core::signal::BlockInput`]) filling samples with `f(k)`.
+fn fill(f: impl Fn(usize) -> f64 + Sync) -> impl Fn(usize, &mut [f64]) + Sync {
+    move |start, out| {
+        for (o, k) in out.iter_mut().zip(start..) {
+            *o = f(k);
+        }
+    }
+}
+
 /// Neighbours each side that the derivative stencils need (`Central4`: two).
 const STENCIL_HALO: usize = 2;
 
@@ -90,13 +99,14 @@ pub fn regression_blocks(
     sink: &mut dyn FnMut(Vec<ChannelRegression>) -> Result<()>,
 ) -> Result<()> {
     let keep = data.valid_range();
-    let v = |k: usize| data.v_at(k);
-    let w = |k: usize| data.w_at(k);
-    let w2 = |k: usize| -data.w_at(k) * data.w_at(k);
-    let vw = |k: usize| data.v_at(k) * data.w_at(k);
-    let v_ref = |k: usize| data.v_ref_at(k);
-    let w_ref = |k: usize| data.w_ref_at(k);
-    let inputs: [&(dyn Fn(usize) -> f64 + Sync); 6] = [&v, &w, &w2, &vw, &v_ref, &w_ref];
+    // Each input fills a block's samples from the recording (aligned as it goes).
+    let v = fill(|k| data.v_at(k));
+    let w = fill(|k| data.w_at(k));
+    let w2 = fill(|k| -data.w_at(k) * data.w_at(k));
+    let vw = fill(|k| data.v_at(k) * data.w_at(k));
+    let v_ref = fill(|k| data.v_ref_at(k));
+    let w_ref = fill(|k| data.w_ref_at(k));
+    let inputs: [wheelid_core::signal::BlockInput<'_>; 6] = [&v, &w, &w2, &vw, &v_ref, &w_ref];
     data.smooth_blocks(inputs, STENCIL_HALO, |block| {
         let rows = block.rows.start.max(keep.start)..block.rows.end.min(keep.end);
         if rows.is_empty() {

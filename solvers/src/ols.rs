@@ -320,12 +320,12 @@ pub struct NeweyWest {
     lags: usize,
     /// The last L + 1 rows, row t in slot t mod (L + 1).
     ring: Vec<f64>,
+    /// The slot the next row goes to.
+    slot: usize,
     /// B: the sum of the rows in the window.
     window: Vec<f64>,
-    /// Σ_s B_s B_sᵀ so far (upper triangle).
-    m: DMatrix<f64>,
-    /// Rows pushed.
-    entered: usize,
+    /// Σ_s B_s B_sᵀ so far, row-major k × k (upper triangle).
+    m: Vec<f64>,
 }
 
 impl NeweyWest {
@@ -335,30 +335,35 @@ impl NeweyWest {
             k,
             lags,
             ring: vec![0.0; (lags + 1) * k],
+            slot: 0,
             window: vec![0.0; k],
-            m: DMatrix::zeros(k, k),
-            entered: 0,
+            m: vec![0.0; k * k],
         }
     }
 
     /// Adds row g_t (its first k values; t is the count of rows pushed before).
     pub fn push(&mut self, g: &[f64]) {
         let k = self.k;
-        let slot = self.entered % (self.lags + 1);
-        let old = &mut self.ring[slot * k..(slot + 1) * k];
+        let old = &mut self.ring[self.slot * k..(self.slot + 1) * k];
         // The slot held row t − (L + 1), which leaves the window now (zero before it filled).
         for ((b, x), new) in self.window.iter_mut().zip(old.iter_mut()).zip(&g[..k]) {
             *b += new - *x;
             *x = *new;
         }
-        self.entered += 1;
+        self.slot = if self.slot == self.lags {
+            0
+        } else {
+            self.slot + 1
+        };
         self.accumulate();
     }
 
     fn accumulate(&mut self) {
-        for a in 0..self.k {
-            for b in a..self.k {
-                self.m[(a, b)] += self.window[a] * self.window[b];
+        let k = self.k;
+        for (a, row) in self.m.chunks_exact_mut(k).enumerate() {
+            let wa = self.window[a];
+            for (mb, wb) in row[a..].iter_mut().zip(&self.window[a..]) {
+                *mb += wa * wb;
             }
         }
     }
@@ -367,8 +372,8 @@ impl NeweyWest {
     /// slot not filled yet holds zeros).
     pub fn finish(mut self) -> DMatrix<f64> {
         let k = self.k;
-        for step in 0..self.lags {
-            let slot = (self.entered + step) % (self.lags + 1);
+        for _ in 0..self.lags {
+            let slot = self.slot;
             for (b, x) in self
                 .window
                 .iter_mut()
@@ -376,14 +381,12 @@ impl NeweyWest {
             {
                 *b -= x;
             }
+            self.ring[slot * k..(slot + 1) * k].fill(0.0);
+            self.slot = if slot == self.lags { 0 } else { slot + 1 };
             self.accumulate();
         }
-        for a in 0..k {
-            for b in 0..a {
-                self.m[(a, b)] = self.m[(b, a)];
-            }
-        }
-        self.m / (self.lags + 1) as f64
+        let m = DMatrix::from_fn(k, k, |a, b| self.m[a.min(b) * k + a.max(b)]);
+        m / (self.lags + 1) as f64
     }
 }
 

@@ -258,11 +258,13 @@ fn spread(
                 .zip(thetas.par_iter())
                 .for_each(|((s, b), theta)| {
                     let e = &b.y - &b.x * theta;
-                    for (t, &et) in e.iter().enumerate() {
+                    // X is column-major: column j's rows are xs[j m .. (j + 1) m].
+                    let (m, xs) = (e.len(), b.x.as_slice());
+                    for (t, (&et, &yt)) in e.iter().zip(b.y.iter()).enumerate() {
                         s.rss += et * et;
-                        s.tss += (b.y[t] - s.mean).powi(2);
-                        for (j, h) in s.row.iter_mut().enumerate() {
-                            *h = b.x[(t, j)] / s.scales[j] * et;
+                        s.tss += (yt - s.mean) * (yt - s.mean);
+                        for (j, (h, d)) in s.row.iter_mut().zip(&s.scales).enumerate() {
+                            *h = xs[j * m + t] / d * et;
                         }
                         s.nw.push(&s.row);
                     }

@@ -468,8 +468,62 @@ fn parse_line(line: &[u8], slot: &[usize], width: usize, cols: &mut [Vec<f64>]) 
     if memchr::memchr2(b'"', b'\r', line).is_some() {
         return None;
     }
-    // One UTF-8 check for the line (a line that fails it goes back to the sequential reader,
-    // which checks cell by cell); commas are ASCII, so every cell is a `str` slice of it.
+    if line.is_ascii() {
+        cells_ascii(line, slot, width, cols)?;
+    } else {
+        cells_utf8(line, slot, width, cols)?;
+    }
+    match cols[0].as_slice() {
+        [.., p, q] if q <= p => None,
+        _ => Some(()),
+    }
+}
+
+/// The cells of an ASCII line (which is UTF-8): each wanted one parsed from its bytes where it
+/// lies (`fast_float2`, the algorithm std's parser adopted, so the same values), the number
+/// required to end at the cell's end — else the cell is read as [`number`] reads it (blanks
+/// around it trimmed); the others skipped. `None` for a cell that is no finite number or a row
+/// of other than `width` cells.
+fn cells_ascii(line: &[u8], slot: &[usize], width: usize, cols: &mut [Vec<f64>]) -> Option<()> {
+    let mut at = 0;
+    for (cell, &o) in slot.iter().enumerate().take(width) {
+        let rest = &line[at..];
+        let end =
+            |from: usize| from + memchr::memchr(b',', &rest[from..]).unwrap_or(rest.len() - from);
+        let used = if o == usize::MAX {
+            end(0)
+        } else {
+            let (x, used) = match fast_float2::parse_partial::<f64, _>(rest) {
+                Ok((x, used)) if matches!(rest.get(used), None | Some(b',')) => (x, used),
+                _ => {
+                    let stop = end(0);
+                    (number(&rest[..stop])?, stop)
+                }
+            };
+            if !x.is_finite() {
+                return None;
+            }
+            cols[o].push(x);
+            used
+        };
+        at += used;
+        if cell + 1 < width {
+            if line.get(at) != Some(&b',') {
+                return None;
+            }
+            at += 1;
+        } else if at != line.len() {
+            return None;
+        }
+    }
+    Some(())
+}
+
+/// [`cells_ascii`] for a line with other characters: one UTF-8 check for the line (a line that
+/// fails it goes back to the sequential reader, which checks cell by cell), then each wanted
+/// cell read as [`number`] reads it.
+fn cells_utf8(line: &[u8], slot: &[usize], width: usize, cols: &mut [Vec<f64>]) -> Option<()> {
+    // Commas are ASCII, so every cell is a `str` slice of the line.
     let text = std::str::from_utf8(line).ok()?;
     let (mut cell, mut start) = (0, 0);
     for stop in memchr::memchr_iter(b',', line).chain(std::iter::once(line.len())) {
@@ -483,13 +537,7 @@ fn parse_line(line: &[u8], slot: &[usize], width: usize, cols: &mut [Vec<f64>]) 
         }
         (cell, start) = (cell + 1, stop + 1);
     }
-    if cell != width {
-        return None;
-    }
-    match cols[0].as_slice() {
-        [.., p, q] if q <= p => None,
-        _ => Some(()),
-    }
+    (cell == width).then_some(())
 }
 
 /// The parts' columns end to end, the first part's grown in place; `None` if a part failed,

@@ -30,6 +30,10 @@ use sci_rs::signal::filter::sosfilt_zi_dyn;
 use super::sos_padlen;
 use crate::error::Error;
 
+/// One input signal of [`sosfiltfilt_blocks`]: `fill(start, out)` writes samples
+/// start … start + out.len() − 1 of the signal into `out` (one call a block, not one a sample).
+pub type BlockInput<'a> = &'a (dyn Fn(usize, &mut [f64]) + Sync);
+
 /// How [`sosfiltfilt_blocks`] cuts a signal.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct BlockPlan {
@@ -130,15 +134,33 @@ fn cascade(sos: &mut [Sos<f64>], data: &mut [f64], reverse: bool) {
     }
 }
 
-/// The input's odd extension at `i` (−padlen ≤ i < n + padlen), as scipy's `odd_ext`.
-fn extended(x: &(dyn Fn(usize) -> f64 + Sync), n: usize, i: isize) -> f64 {
+/// Sample k of the input.
+fn sample(x: BlockInput<'_>, k: usize) -> f64 {
+    let mut one = [0.0];
+    x(k, &mut one);
+    one[0]
+}
+
+/// Appends the input's odd extension (as scipy's `odd_ext`) on `range` (−padlen ≤ i <
+/// n + padlen) to `out`: the samples inside [0, n) in one call of `x`, the padding sample by
+/// sample (at most padlen of them).
+fn extend_extended(x: BlockInput<'_>, n: usize, range: Range<isize>, out: &mut Vec<f64>) {
     let last = n as isize - 1;
-    if i < 0 {
-        2.0 * x(0) - x((-i) as usize)
-    } else if i > last {
-        2.0 * x(last as usize) - x((2 * last - i) as usize)
-    } else {
-        x(i as usize)
+    let ends = || (sample(x, 0), sample(x, last as usize));
+    let (mut first, mut tail) = (None, None);
+    for i in range.start..range.end.min(0) {
+        let x0 = *first.get_or_insert_with(|| ends().0);
+        out.push(2.0 * x0 - sample(x, (-i) as usize));
+    }
+    let (a, b) = (range.start.max(0), range.end.min(n as isize));
+    if a < b {
+        let at = out.len();
+        out.resize(at + (b - a) as usize, 0.0);
+        x(a as usize, &mut out[at..]);
+    }
+    for i in range.start.max(last + 1)..range.end {
+        let xl = *tail.get_or_insert_with(|| ends().1);
+        out.push(2.0 * xl - sample(x, (2 * last - i) as usize));
     }
 }
 
@@ -165,7 +187,7 @@ fn steady(zi: &[Sos<f64>], x0: f64) -> Vec<Sos<f64>> {
 pub fn sosfiltfilt_blocks<const S: usize, E: From<Error>>(
     sos: &[Sos<f64>],
     n: usize,
-    inputs: [&(dyn Fn(usize) -> f64 + Sync); S],
+    inputs: [BlockInput<'_>; S],
     plan: BlockPlan,
     mut consume: impl FnMut(FilteredBlock<'_, S>) -> std::result::Result<(), E>,
 ) -> std::result::Result<(), E> {
@@ -189,7 +211,7 @@ pub fn sosfiltfilt_blocks<const S: usize, E: From<Error>>(
     let mut lanes: Vec<Lane> = inputs
         .iter()
         .map(|x| Lane {
-            forward: steady(&zi, extended(*x, n, -(padlen as isize))),
+            forward: steady(&zi, 2.0 * sample(*x, 0) - sample(*x, padlen)),
             cursor: -(padlen as isize),
             buf: Vec::new(),
             out: Vec::new(),
@@ -206,7 +228,7 @@ pub fn sosfiltfilt_blocks<const S: usize, E: From<Error>>(
         let lo = a.saturating_sub(plan.halo);
         let hi = (b + plan.halo).min(n);
         let next_lo = b.saturating_sub(plan.halo);
-        let filter = |(lane, x): (&mut Lane, &&(dyn Fn(usize) -> f64 + Sync))| {
+        let filter = |(lane, x): (&mut Lane, &BlockInput<'_>)| {
             filter_block(lane, *x, n, padlen, &zi, (lo, hi, next_lo), plan.lookahead);
         };
         if (b - a) * S >= 1 << 16 {
@@ -231,7 +253,7 @@ pub fn sosfiltfilt_blocks<const S: usize, E: From<Error>>(
 /// on [lo, hi) land in `lane.out`.
 fn filter_block(
     lane: &mut Lane,
-    x: &(dyn Fn(usize) -> f64 + Sync),
+    x: BlockInput<'_>,
     n: usize,
     padlen: usize,
     zi: &[Sos<f64>],
@@ -248,11 +270,12 @@ fn filter_block(
     let (lo_i, next_i) = (lo as isize, next_lo as isize);
     // Bring the forward state from the cursor to `lo` (the first block's padding).
     if lane.cursor < lo_i {
-        let mut pad: Vec<f64> = (lane.cursor..lo_i).map(|i| extended(x, n, i)).collect();
+        let mut pad = Vec::new();
+        extend_extended(x, n, lane.cursor..lo_i, &mut pad);
         cascade(&mut lane.forward, &mut pad, false);
     }
     lane.buf.clear();
-    lane.buf.extend((lo_i..end).map(|i| extended(x, n, i)));
+    extend_extended(x, n, lo_i..end, &mut lane.buf);
     let split = (next_i - lo_i) as usize;
     let (head, ahead) = lane.buf.split_at_mut(split);
     cascade(&mut lane.forward, head, false);
@@ -311,7 +334,8 @@ mod tests {
                     halo,
                 };
                 let mut covered = 0;
-                let (fx, fx2) = (|k: usize| x[k], |k: usize| -x[k] * x[k]);
+                let fx = |k: usize, out: &mut [f64]| out.copy_from_slice(&x[k..k + out.len()]);
+                let fx2 = |k: usize, out: &mut [f64]| out.copy_from_slice(&x2[k..k + out.len()]);
                 sosfiltfilt_blocks::<2, Error>(&sos, n, [&fx, &fx2], plan, |b| {
                     assert_eq!(b.rows.start, covered, "blocks in order, no gap");
                     assert_eq!(b.offset, b.rows.start.saturating_sub(halo));
@@ -345,7 +369,7 @@ mod tests {
         }
         .sos()
         .expect("valid filter");
-        let x = |_: usize| 1.0;
+        let x = |_: usize, out: &mut [f64]| out.fill(1.0);
         let plan = BlockPlan {
             block: 10,
             lookahead: 10,
