@@ -426,9 +426,10 @@ fn cutoff_rule(recs: &[(&Recording, f64)]) -> Result<(f64, CutoffChoice)> {
             [(&r.v_ref[..], fs_r), (&r.w_ref[..], fs_r)]
         })
         .collect();
+    let mut planner = realfft::RealFftPlanner::new();
     let f95 = columns
         .iter()
-        .filter_map(|(col, fs_r)| signal::power_quantile_hz(col, *fs_r, 0.95))
+        .filter_map(|(col, fs_r)| signal::power_quantile_hz_with(&mut planner, col, *fs_r, 0.95))
         .reduce(f64::max);
     let raw = f95.map_or(fs / 10.0, |f| 2.0 * f);
     let lo = (5.0 / t_min).min(fs / 5.0);

@@ -334,6 +334,18 @@ pub fn derivative(x: &[f64], dt: f64, stencil: Stencil) -> Result<Vec<f64>> {
 ///
 /// Used by the default cut-off rule (see `condition`).
 pub fn power_quantile_hz(x: &[f64], fs_hz: f64, fraction: f64) -> Option<f64> {
+    power_quantile_hz_with(&mut realfft::RealFftPlanner::new(), x, fs_hz, fraction)
+}
+
+/// [`power_quantile_hz`] with the transforms of `planner`, which keeps them (and their
+/// twiddle factors, a million sines and cosines for a 1e6-sample signal) for the next signal
+/// of the same length.
+pub fn power_quantile_hz_with(
+    planner: &mut realfft::RealFftPlanner<f64>,
+    x: &[f64],
+    fs_hz: f64,
+    fraction: f64,
+) -> Option<f64> {
     let n = x.len();
     if n < 4 {
         return None;
@@ -341,7 +353,7 @@ pub fn power_quantile_hz(x: &[f64], fs_hz: f64, fraction: f64) -> Option<f64> {
     let mean = x.iter().sum::<f64>() / n as f64;
     let mut input: Vec<f64> = x.iter().map(|v| v - mean).collect();
     // The real-input transform: bins 0 … ⌊n/2⌋ of the full one, at half its work and memory.
-    let r2c = realfft::RealFftPlanner::<f64>::new().plan_fft_forward(n);
+    let r2c = planner.plan_fft_forward(n);
     let mut spectrum = r2c.make_output_vec();
     r2c.process(&mut input, &mut spectrum).ok()?;
     drop(input);

@@ -126,17 +126,17 @@ pub fn rk4_step<const N: usize, U: StepCommand>(
 const FLUSH: f64 = 1e-200;
 
 /// Calls `step(u0, u1, h, exponential)` for the equal sub-steps of the interval [t_{k−1}, t_k]
-/// that [`plan`] sets for θ, with the command held or linearly interpolated as `hold` says;
+/// that [`plan`] sets for θ (`planner`: θ's part of it, made once a run), with the command held or linearly interpolated as `hold` says;
 /// returns the interval's length.
 fn for_each_substep(
     rec: &Recording,
     k: usize,
     hold: CommandHold,
-    theta: &[f64; 6],
+    planner: &Planner,
     mut step: impl FnMut((f64, f64), (f64, f64), f64, bool),
 ) -> f64 {
     let span = rec.t[k] - rec.t[k - 1];
-    let plan = plan(theta, span);
+    let plan = planner.plan(span);
     let exponential = plan.exponential();
     let ua = (rec.v_ref[k - 1], rec.w_ref[k - 1]);
     let ub = match hold {
@@ -223,16 +223,20 @@ impl Plan {
         let mut j = 0usize;
         let mut t = 0.0f64;
         let mut next = first;
+        // j/equal of the sub-step's start: the previous one's end (the same quotient).
+        let mut f_start = 0.0;
         std::iter::from_fn(move || {
             if equal > 0 {
                 (j < equal).then(|| {
+                    let f1 = (j + 1) as f64 / equal as f64;
                     let s = Substep {
-                        f0: j as f64 / equal as f64,
-                        f1: (j + 1) as f64 / equal as f64,
+                        f0: f_start,
+                        f1,
                         h: h_eq,
                         t0: j as f64 * h_eq,
                         t1: (j + 1) as f64 * h_eq,
                     };
+                    f_start = f1;
                     j += 1;
                     s
                 })
@@ -269,35 +273,57 @@ impl Plan {
 
 /// The [`Plan`] for θ over an interval of `span` seconds.
 pub fn plan(theta: &[f64; 6], span: f64) -> Plan {
-    let count = |h: f64| (span / h).ceil().max(1.0) as usize;
-    let h_rk4 = substep(theta);
-    let equal = count(h_rk4);
-    let taus = [theta[0] / theta[3], theta[1] / theta[5]].map(f64::abs);
-    let stiff = equal > STIFF_SUBSTEPS && h_rk4 < 0.25 * ETD_MAX_SUBSTEP;
-    if !stiff || span.is_nan() || span <= 0.0 || taus.iter().any(|t| !t.is_finite()) {
-        return Plan {
-            span,
-            equal,
-            first: span,
-            cap: span,
-        };
+    Planner::new(theta).plan(span)
+}
+
+/// θ's part of [`plan`] (the RK4 sub-step and the time constants), computed once for the
+/// many intervals of a run: [`Planner::plan`] is [`plan`], the same operations on the same
+/// values, with only the interval's own left per sample.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Planner {
+    h_rk4: f64,
+    taus: [f64; 2],
+}
+
+impl Planner {
+    pub(crate) fn new(theta: &[f64; 6]) -> Self {
+        Self {
+            h_rk4: substep(theta),
+            taus: [theta[0] / theta[3], theta[1] / theta[5]].map(f64::abs),
+        }
     }
-    let floor = span / STIFF_SUBSTEPS as f64;
-    let cap = taus
-        .iter()
-        .map(|t| t / 5.0)
-        .filter(|h| *h >= floor)
-        .fold(ETD_MAX_SUBSTEP, f64::min);
-    // Both on fixed fractions of the interval (span/2^m, span/n), so that the grid does not
-    // move with θ between changes of m, n, as RK4's does not between changes of its count.
-    let cap = span / (span / cap).ceil();
-    let fastest = taus[0].min(taus[1]).max(MIN_SUBSTEP);
-    let halvings = (span / (0.25 * fastest)).log2().ceil().clamp(0.0, 30.0);
-    Plan {
-        span,
-        equal: 0,
-        first: (span / halvings.exp2()).min(cap),
-        cap,
+
+    /// [`plan`] over an interval of `span` seconds.
+    pub(crate) fn plan(&self, span: f64) -> Plan {
+        let Planner { h_rk4, taus } = *self;
+        let count = |h: f64| (span / h).ceil().max(1.0) as usize;
+        let equal = count(h_rk4);
+        let stiff = equal > STIFF_SUBSTEPS && h_rk4 < 0.25 * ETD_MAX_SUBSTEP;
+        if !stiff || span.is_nan() || span <= 0.0 || taus.iter().any(|t| !t.is_finite()) {
+            return Plan {
+                span,
+                equal,
+                first: span,
+                cap: span,
+            };
+        }
+        let floor = span / STIFF_SUBSTEPS as f64;
+        let cap = taus
+            .iter()
+            .map(|t| t / 5.0)
+            .filter(|h| *h >= floor)
+            .fold(ETD_MAX_SUBSTEP, f64::min);
+        // Both on fixed fractions of the interval (span/2^m, span/n), so that the grid does not
+        // move with θ between changes of m, n, as RK4's does not between changes of its count.
+        let cap = span / (span / cap).ceil();
+        let fastest = taus[0].min(taus[1]).max(MIN_SUBSTEP);
+        let halvings = (span / (0.25 * fastest)).log2().ceil().clamp(0.0, 30.0);
+        Plan {
+            span,
+            equal: 0,
+            first: (span / halvings.exp2()).min(cap),
+            cap,
+        }
     }
 }
 
@@ -498,6 +524,7 @@ pub(crate) struct FreeRun<'a> {
     hold: CommandHold,
     avg: bool,
     initial: [f64; 2],
+    planner: Planner,
 }
 
 impl<'a> FreeRun<'a> {
@@ -510,6 +537,7 @@ impl<'a> FreeRun<'a> {
             hold: setup.hold,
             avg: setup.avg,
             initial: [setup.v0, setup.w0],
+            planner: Planner::new(&th),
         }
     }
 
@@ -548,7 +576,7 @@ impl<'a> FreeRun<'a> {
             self.rec,
             k,
             self.hold,
-            &self.th,
+            &self.planner,
             |u0, u1, h, exponential| {
                 if exponential {
                     let lin = [-t4 * i1, -(t5 * x[0] + t6) * i2];

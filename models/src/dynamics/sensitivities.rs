@@ -5,7 +5,7 @@
 use nalgebra::DMatrix;
 use wheelid_core::{Recording, Result, Sensitivities};
 
-use super::{Setup, etdrk4_step, for_each_substep, rk4_step, setup};
+use super::{Planner, Setup, etdrk4_step, for_each_substep, rk4_step, setup};
 
 /// Number of sensitivity columns: θ1…θ6, then v0, ω0.
 const NS: usize = 8;
@@ -89,9 +89,10 @@ fn integrate_columns<const M: usize, const Z: usize, const OFF: usize>(
     sink(0, &z);
     let inv = [1.0 / th[0], 1.0 / th[1]];
     let f = |z: &[f64; Z], u: (f64, f64)| augmented_rhs::<M, Z, OFF>(&th, inv, z, u);
+    let planner = Planner::new(&th);
     for k in 1..n {
         let mut q = [0.0; Z];
-        let span = for_each_substep(rec, k, hold, &th, |u0, u1, h, exponential| {
+        let span = for_each_substep(rec, k, hold, &planner, |u0, u1, h, exponential| {
             if exponential {
                 let lin = [-th[3] * inv[0], -(th[4] * z[0] + th[5]) * inv[1]];
                 etdrk4_step(f, lin, &mut z, &mut q, u0, u1, h);
