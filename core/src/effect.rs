@@ -258,6 +258,14 @@ impl FitData<'_> {
             .map(|r| r.t[r.len() - 1] - r.t[0])
             .fold(0.0f64, f64::max)
     }
+    /// The longest mean sample period over the recordings \[s\] (0 without two samples).
+    pub fn period_s(&self) -> f64 {
+        self.recordings
+            .iter()
+            .filter(|r| r.len() > 1)
+            .map(|r| (r.t[r.len() - 1] - r.t[0]) / (r.len() - 1) as f64)
+            .fold(0.0f64, f64::max)
+    }
     /// Standard error of θ\[i\].
     pub fn std_err(&self, i: usize) -> f64 {
         self.covariance[(i, i)].max(0.0).sqrt()

@@ -10,8 +10,15 @@ static PARAMS: [ParamInfo; 1] = [ParamInfo {
     description: "dead time of the commands",
 }];
 
+/// The shortest dead time named, in sample periods. Below it a dead time is the size of what
+/// the nominal model's stamping offset (issue 7's window-end/middle conventions, a host's
+/// jitter) and the window averages' quadrature already settle to: a fit that leans on it is
+/// reading timing noise (seen: 2 ms at a 20 ms period beside a traction limit), not a link's
+/// or a controller's latency, which is a sizeable part of a cycle or more.
+const MIN_PERIODS: f64 = 0.25;
+
 /// Dead time τ \[s\] of the commands (stage 1 of [`Terms`]); null 0, fitted within [0, 2] s,
-/// plausible up to 1.5 s.
+/// plausible from [`MIN_PERIODS`] sample periods up to 1.5 s.
 #[derive(Debug, Clone, Copy)]
 pub struct InputDelay;
 
@@ -42,11 +49,18 @@ impl Effect for InputDelay {
         j: usize,
         x: f64,
         se: f64,
-        _fit: &FitData<'_>,
+        fit: &FitData<'_>,
     ) -> std::result::Result<(), String> {
         significant(&PARAMS[j], x, se, 0.0)?;
         if x > 1.5 {
             return Err(format!("a dead time of {x:.3} s is not plausible"));
+        }
+        let period = fit.period_s();
+        if x < MIN_PERIODS * period {
+            return Err(format!(
+                "a dead time of {x:.4} s is under {MIN_PERIODS} of the {period:.4} s sample \
+                 period: not told apart from how the host stamps its samples"
+            ));
         }
         Ok(())
     }
