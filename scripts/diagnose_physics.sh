@@ -18,8 +18,8 @@
 # derivative-filter fix (the Pioneer-like robot's recordings changed); 1009-1010 once after
 # the acceptance change of be1ac27 (near-perfect fits kept), with clean 2201-2250; 1011-1012
 # once with the traction_limit candidate (41bdbd1); clean 2251-2270 once at 82ea0fb; 1013-1014
-# and clean 2271-2370 once at 33ac34e (the change-time interval); the next report takes
-# 1015.. and 2371.. .
+# and clean 2271-2370 once at 33ac34e (the change-time interval); 1015-1016 once at 85d0171
+# (the input_delay floor); the next report takes 1017.. and 2371.. .
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
