@@ -69,3 +69,49 @@ impl Effect for InputDelay {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use wheelid_core::Recording;
+
+    /// At a 20 ms period: 2 ms (a tenth of a period, the smoke test's spurious delay) is
+    /// refused however significant, 10 ms (half a period, the harness's shortest latency) is
+    /// named, 1.6 s is refused as implausible.
+    #[test]
+    fn dead_times_under_a_quarter_period_or_over_1_5_s_are_not_named() {
+        let n = 501;
+        let t: Vec<f64> = (0..n).map(|k| k as f64 * 0.02).collect();
+        let rec = Recording::new(
+            "r.csv",
+            t,
+            vec![0.1; n],
+            vec![0.0; n],
+            vec![0.1; n],
+            vec![0.0; n],
+        )
+        .expect("valid");
+        let recordings = [rec];
+        let theta = [0.0; 7];
+        let covariance = nalgebra::DMatrix::zeros(7, 7);
+        let fit = FitData {
+            recordings: &recordings,
+            theta: &theta,
+            covariance: &covariance,
+            base: 6,
+            track: None,
+        };
+        approx::assert_relative_eq!(fit.period_s(), 0.02, max_relative = 1e-12);
+        let plausible = |x: f64| InputDelay.plausible(0, x, 1e-5, &fit);
+        let short = plausible(0.002).expect_err("a tenth of a period");
+        assert!(
+            short.contains("under 0.25 of the 0.0200 s sample period"),
+            "{short}"
+        );
+        assert!(plausible(0.0049).is_err());
+        assert!(plausible(0.010).is_ok());
+        assert!(plausible(1.6).is_err());
+        // Not significant: refused before its size is looked at.
+        assert!(InputDelay.plausible(0, 0.1, 0.05, &fit).is_err());
+    }
+}
