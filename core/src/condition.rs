@@ -88,7 +88,7 @@ pub struct Conditioned<'a> {
     /// Median period before resampling \[s\], if the recording had to be resampled.
     pub resampled_from: Option<f64>,
     /// The aligned columns v_ref, w_ref, v, ω (module docs, step 2), made on first use: a
-    /// caller that reads them sample by sample ([`Conditioned::aligned_sample`], the blocked
+    /// caller that reads them sample by sample ([`Conditioned::v_at`] and the others, the blocked
     /// regression) never holds them.
     aligned: std::sync::OnceLock<[Vec<f64>; 4]>,
     /// The recording's command hold and velocity sampling (read once from its metadata).
@@ -131,17 +131,6 @@ impl Conditioned<'_> {
     /// The measured angular velocity at the sample instants, length n \[rad/s\].
     pub fn w(&self) -> &[f64] {
         &self.aligned()[3]
-    }
-
-    /// Sample k (< n) of the aligned columns, [v_ref, w_ref, v, ω], computed from the recording
-    /// without making the columns: the values [`Conditioned::v_ref`] and the others hold.
-    pub fn aligned_sample(&self, k: usize) -> [f64; 4] {
-        [
-            self.v_ref_at(k),
-            self.w_ref_at(k),
-            self.v_at(k),
-            self.w_at(k),
-        ]
     }
 
     /// [`Conditioned::v_ref`]\[k\] without making the column.

@@ -338,8 +338,7 @@ pub fn power_quantile_hz(x: &[f64], fs_hz: f64, fraction: f64) -> Option<f64> {
 }
 
 /// [`power_quantile_hz`] with the transforms of `planner`, which keeps them (and their
-/// twiddle factors, a million sines and cosines for a 1e6-sample signal) for the next signal
-/// of the same length.
+/// twiddle factors, one sine and cosine each) for the next signal of the same length.
 pub fn power_quantile_hz_with(
     planner: &mut realfft::RealFftPlanner<f64>,
     x: &[f64],

@@ -121,17 +121,15 @@ fn tall_r(
         let mut buf = vec![0.0; k + 1];
         while start < rows.end {
             let len = QR_BLOCK.min(rows.end - start);
-            let top = r.nrows();
-            let mut block = DMatrix::<f64>::zeros(top + len, k + 1);
-            block.view_mut((0, 0), (top, k + 1)).copy_from(&r);
-            for i in 0..len {
-                row(start + i, &mut buf);
-                for j in 0..k {
-                    block[(top + i, j)] = buf[j] / scales[j];
+            r = qr_update(&r, len, |mut block| {
+                for i in 0..len {
+                    row(start + i, &mut buf);
+                    for j in 0..k {
+                        block[(i, j)] = buf[j] / scales[j];
+                    }
+                    block[(i, k)] = buf[k];
                 }
-                block[(top + i, k)] = buf[k];
-            }
-            r = block.qr().r();
+            });
             start += len;
         }
         r
@@ -153,6 +151,20 @@ fn tall_r(
         stacked.view_mut((at, 0), r.shape()).copy_from(r);
         at += r.nrows();
     }
+    stacked.qr().r()
+}
+
+/// The triangular factor of [r; B] (Householder QR), where `fill` writes the `len` new rows B
+/// (as many columns as r) into the view it is given: one step of the row-blocked QR.
+pub(crate) fn qr_update(
+    r: &DMatrix<f64>,
+    len: usize,
+    fill: impl FnOnce(nalgebra::DMatrixViewMut<'_, f64>),
+) -> DMatrix<f64> {
+    let (top, cols) = r.shape();
+    let mut stacked = DMatrix::<f64>::zeros(top + len, cols);
+    stacked.view_mut((0, 0), (top, cols)).copy_from(r);
+    fill(stacked.view_mut((top, 0), (len, cols)));
     stacked.qr().r()
 }
 
@@ -431,6 +443,24 @@ impl Solver for Ols {
     }
 }
 
+/// A test problem of `n` rows: three columns of scales 1e3, 1e3 and 1e-2, the first two
+/// nearly collinear (condition number > 1e3), y = X [0.5, −1.5, 40] plus a bounded
+/// deterministic noise.
+#[cfg(test)]
+pub(crate) fn ill_scaled_problem(n: usize) -> (DMatrix<f64>, DVector<f64>) {
+    let x = DMatrix::from_fn(n, 3, |t, j| {
+        let s = t as f64 * 1e-3;
+        match j {
+            0 => 1e3 * (s.sin() + 1e-4 * (7.3 * s).cos()),
+            1 => 1e3 * s.sin() + 0.3 * (3.1 * s).sin(),
+            _ => 1e-2 * (0.7 * s).cos(),
+        }
+    });
+    let noise = DVector::from_fn(n, |t, _| ((t * 7919) % 1009) as f64 / 1009.0 - 0.5);
+    let y = &x * DVector::from_vec(vec![0.5, -1.5, 40.0]) + noise;
+    (x, y)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -477,16 +507,7 @@ mod tests {
         // a condition number > 1e3: θ and the Newey–West covariance against one SVD of the
         // whole column-scaled X with U formed.
         let n = 200_003;
-        let x = DMatrix::from_fn(n, 3, |t, j| {
-            let s = t as f64 * 1e-3;
-            match j {
-                0 => 1e3 * (s.sin() + 1e-4 * (7.3 * s).cos()),
-                1 => 1e3 * s.sin() + 0.3 * (3.1 * s).sin(),
-                _ => 1e-2 * (0.7 * s).cos(),
-            }
-        });
-        let e0 = DVector::from_fn(n, |t, _| ((t * 7919) % 1009) as f64 / 1009.0 - 0.5);
-        let y = &x * DVector::from_vec(vec![0.5, -1.5, 40.0]) + &e0;
+        let (x, y) = ill_scaled_problem(n);
         let names = ["a", "b", "c"];
         let lags = 12;
         let p = LinearProblem {

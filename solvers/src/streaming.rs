@@ -74,16 +74,12 @@ impl QrRows {
         let mut start = 0;
         while start < m {
             let len = QR_CHUNK.min(m - start);
-            let top = self.r.nrows();
-            let mut stacked = DMatrix::<f64>::zeros(top + len, k + 1);
-            stacked.view_mut((0, 0), (top, k + 1)).copy_from(&self.r);
-            stacked
-                .view_mut((top, 0), (len, k))
-                .copy_from(&x.view((start, 0), (len, k)));
-            stacked
-                .view_mut((top, k), (len, 1))
-                .copy_from(&y.rows(start, len));
-            self.r = stacked.qr().r();
+            self.r = ols::qr_update(&self.r, len, |mut block| {
+                block
+                    .columns_mut(0, k)
+                    .copy_from(&x.view((start, 0), (len, k)));
+                block.column_mut(k).copy_from(&y.rows(start, len));
+            });
             start += len;
         }
         self.n += m;
@@ -148,16 +144,7 @@ mod tests {
     #[test]
     fn two_passes_over_blocks_equal_ols_on_the_whole_problem() {
         let n = 30_011;
-        let x = DMatrix::from_fn(n, 3, |t, j| {
-            let s = t as f64 * 1e-3;
-            match j {
-                0 => 1e3 * (s.sin() + 1e-4 * (7.3 * s).cos()),
-                1 => 1e3 * s.sin() + 0.3 * (3.1 * s).sin(),
-                _ => 1e-2 * (0.7 * s).cos(),
-            }
-        });
-        let noise = DVector::from_fn(n, |t, _| ((t * 7919) % 1009) as f64 / 1009.0 - 0.5);
-        let y = &x * DVector::from_vec(vec![0.5, -1.5, 40.0]) + &noise;
+        let (x, y) = ols::ill_scaled_problem(n);
         let names = ["a", "b", "c"];
         for lags in [0usize, 12] {
             let whole = Ols::default()
