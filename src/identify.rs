@@ -456,6 +456,9 @@ fn steady_state(
     for c in data {
         let rec = &c.recording;
         let n = rec.len();
+        // Samples to settle (3 time constants) per channel, and a second's worth.
+        let settle_in = [tau_v, tau_w].map(|tau| (3.0 * tau / c.dt).ceil() as usize);
+        let second = (1.0 / c.dt) as usize;
         let mut start = 0;
         while start < n {
             let mut end = start + 1;
@@ -465,9 +468,9 @@ fn steady_state(
             {
                 end += 1;
             }
-            for (ch, tau) in [(0usize, tau_v), (1, tau_w)] {
-                let settle = start + (3.0 * tau / c.dt).ceil() as usize;
-                if settle + (1.0 / c.dt) as usize > end {
+            for (ch, settle_in) in settle_in.into_iter().enumerate() {
+                let settle = start + settle_in;
+                if settle + second > end {
                     continue;
                 }
                 let m = (end - settle) as f64;

@@ -14,8 +14,9 @@
 //! * [`iv`]: instrumental variables with instruments from the model's own noise-free
 //!   simulation, iterated — linear and fast;
 //!
-//! least squares over a regression that arrives in blocks ([`streaming`]: a QR factor
-//! updated block by block, then a second pass for the Newey–West errors), and one online
+//! least squares over a regression that arrives in blocks ([`streaming`]: a QR factor and
+//! the window moments of the Newey–West errors, updated block by block in one pass), and one
+//! online
 //! estimator:
 //! * [`recursive`]: recursive least squares with forgetting and a change detector — per
 //!   sample, no allocation.

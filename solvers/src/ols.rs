@@ -354,7 +354,42 @@ impl NeweyWest {
     }
 
     /// Adds row g_t (its first k values; t is the count of rows pushed before).
+    #[inline]
     pub fn push(&mut self, g: &[f64]) {
+        match self.k {
+            1 => self.push_k::<1>(g),
+            2 => self.push_k::<2>(g),
+            3 => self.push_k::<3>(g),
+            4 => self.push_k::<4>(g),
+            _ => self.push_any(g),
+        }
+    }
+
+    /// [`NeweyWest::push`] for k = K, unrolled: the same operations in the same order.
+    #[inline]
+    fn push_k<const K: usize>(&mut self, g: &[f64]) {
+        let g: &[f64; K] = g[..K].try_into().expect("k values");
+        let old: &mut [f64; K] = (&mut self.ring[self.slot * K..(self.slot + 1) * K])
+            .try_into()
+            .expect("k values");
+        let window: &mut [f64; K] = self.window.as_mut_slice().try_into().expect("k values");
+        for ((b, x), new) in window.iter_mut().zip(old.iter_mut()).zip(g) {
+            *b += new - *x;
+            *x = *new;
+        }
+        self.slot = if self.slot == self.lags {
+            0
+        } else {
+            self.slot + 1
+        };
+        for a in 0..K {
+            for b in a..K {
+                self.m[a * K + b] += window[a] * window[b];
+            }
+        }
+    }
+
+    fn push_any(&mut self, g: &[f64]) {
         let k = self.k;
         let old = &mut self.ring[self.slot * k..(self.slot + 1) * k];
         // The slot held row t − (L + 1), which leaves the window now (zero before it filled).

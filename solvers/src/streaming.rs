@@ -14,17 +14,22 @@
 //! rank, and the same residual sum of squares: any [`wheelid_core::Solver`] solves it in place of
 //! the whole problem ([`QrRows::compressed`]).
 //!
-//! **Pass 2, standard errors.** The residuals are gone from the compressed problem, and with
-//! them what a solver's standard errors need; with θ̂ known, a second pass over the same rows
-//! gives e_t = y_t − X_t θ̂ and the Newey–West meat of h_t = X̃_tᵀ e_t (X̃ = X D⁻¹, D the
-//! column norms) row by row ([`crate::ols::NeweyWest`], L + 1 rows held), and
-//! [`covariance`] forms Cov(θ̂) = D⁻¹ H̃⁻¹ S_h H̃⁻¹ D⁻¹ · n/(n − k), H̃ = R̃ᵀR̃ — what
-//! [`crate::Ols`] computes from the whole X (test).
+//! **Standard errors.** The residuals are gone from the compressed problem, and with them
+//! what a solver's standard errors need. Either a second pass over the same rows, with θ̂
+//! known, gives e_t = y_t − X_t θ̂ and the Newey–West meat of h_t = X̃_tᵀ e_t (X̃ = X D⁻¹, D
+//! the column norms) row by row ([`crate::ols::NeweyWest`], L + 1 rows held); or, in the same
+//! pass as the compression, the rows' window moments ([`WindowMoments`]) give that meat at
+//! any θ afterwards — the meat is a quadratic in θ. [`covariance`] forms
+//! Cov(θ̂) = D⁻¹ H̃⁻¹ S_h H̃⁻¹ D⁻¹ · n/(n − k), H̃ = R̃ᵀR̃ — what [`crate::Ols`] computes from the
+//! whole X (test).
 
 use nalgebra::{DMatrix, DVector};
 use wheelid_core::{LinearProblem, SolveError};
 
 use crate::ols::{self, Spread};
+
+mod moments;
+pub use moments::WindowMoments;
 
 /// Rows per Householder step of [`QrRows::push`].
 const QR_CHUNK: usize = 4096;
@@ -97,7 +102,7 @@ impl QrRows {
 }
 
 /// Cov(θ̂) (k × k) of least squares on `n` rows whose compressed problem is `x_compressed`
-/// ((k+1) × k, [`QrRows::compressed`]), from pass 2's Newey–West meat `meat_h` of
+/// ((k+1) × k, [`QrRows::compressed`]), from the Newey–West meat `meat_h` of
 /// h_t = X̃_tᵀ e_t with X̃ = X D⁻¹, D = [`column_norms`] (`lags` > 0), or from the residual sum
 /// of squares `rss` (`lags` = 0): the covariance [`crate::Ols`] gives the whole problem.
 ///
@@ -127,7 +132,7 @@ pub fn covariance(
 }
 
 /// The column norms D of X from its compressed problem (k; 1 for a zero column, as
-/// [`crate::Ols`] scales): pass 2 scales its rows by them.
+/// [`crate::Ols`] scales): the Newey–West meat is of the rows scaled by them.
 pub fn column_norms(x_compressed: &DMatrix<f64>) -> Vec<f64> {
     ols::column_scales(x_compressed).iter().copied().collect()
 }
@@ -139,10 +144,11 @@ mod tests {
     use approx::assert_relative_eq;
     use wheelid_core::Solver;
 
-    /// 30,011 rows pushed in uneven blocks: θ from the compressed problem and the two-pass
-    /// Newey–West covariance equal `Ols` on the whole problem.
+    /// 30,011 rows pushed in uneven blocks: θ from the compressed problem, and the Newey–West
+    /// covariance from a second pass or from pass 1's window moments, equal `Ols` on the whole
+    /// problem.
     #[test]
-    fn two_passes_over_blocks_equal_ols_on_the_whole_problem() {
+    fn blocks_equal_ols_on_the_whole_problem_in_two_passes_or_one() {
         let n = 30_011;
         let (x, y) = ols::ill_scaled_problem(n);
         let names = ["a", "b", "c"];
@@ -194,6 +200,30 @@ mod tests {
             }
             let meat = (lags > 0).then(|| nw.finish());
             let cov = covariance(&xc, n, &names, meat, rss).expect("full rank");
+            assert_relative_eq!(cov, whole.covariance, max_relative = 1e-7);
+            // Or in pass 1: the window moments around a pilot (least squares on the first
+            // 4,100 rows, as identify takes the first block's), and the compressed problem's RSS.
+            let head: Vec<usize> = (0..4_100).collect();
+            let (xh, yh) = (x.select_rows(&head), y.select_rows(&head));
+            let pilot = Ols::default()
+                .solve(&LinearProblem {
+                    x: &xh,
+                    y: &yh,
+                    names: &names,
+                    bounds: None,
+                    correlation_lags: 0,
+                })
+                .expect("solves")
+                .theta;
+            let pilot: Vec<f64> = pilot.iter().copied().collect();
+            let r0 = xh.qr().r();
+            let mut moments = WindowMoments::new(lags, &pilot, Some(&r0));
+            for w in cuts.windows(2) {
+                let rows: Vec<usize> = (w[0]..w[1]).collect();
+                moments.push(&x.select_rows(&rows), &y.select_rows(&rows));
+            }
+            let meat = (lags > 0).then(|| moments.meat(fit.theta.as_slice(), &d));
+            let cov = covariance(&xc, n, &names, meat, fit.rss).expect("full rank");
             assert_relative_eq!(cov, whole.covariance, max_relative = 1e-7);
         }
     }

@@ -11,8 +11,7 @@ use wheelid_core::{
     BoundState, ChannelRegression, Estimate, Estimator, EstimatorInput, LinearFit, LinearProblem,
     RegressorModel, SolveError, SolveStatus, Solver,
 };
-use wheelid_solvers::NeweyWest;
-use wheelid_solvers::streaming::{self, QrRows};
+use wheelid_solvers::streaming::{self, QrRows, WindowMoments};
 
 use super::prepare::Prepared;
 use super::{EstimateReport, IdentifyError, IdentifySettings};
@@ -34,11 +33,12 @@ pub(super) struct LeastSquares {
 pub(super) const PLOT_ROWS: usize = 20_000;
 
 /// Builds each recording's regression (eq. 4.2), stacks them per channel and solves each
-/// channel with `solver` (eq. 4.3–4.7, within `settings.bounds` when given), in two passes
-/// over the model's regression blocks ([`RegressorModel::regression_blocks`]) that never hold
-/// a whole regressor (`wheelid_solvers::streaming`): the first compresses each channel's
-/// rows into their QR factor, which the solver solves; the second, with θ̂, sums the
-/// residuals' Newey–West meat, R² and the rows kept for the plots.
+/// channel with `solver` (eq. 4.3–4.7, within `settings.bounds` when given), in one pass
+/// over the model's regression blocks ([`RegressorModel::regression_blocks`]) that never holds
+/// a whole regressor (`wheelid_solvers::streaming`): each channel's rows are compressed into
+/// their QR factor, which the solver solves, and into the window moments that give the
+/// Newey–West meat at the θ̂ solved afterwards ([`WindowMoments`]); R² from the QR's residual
+/// sum of squares and the regressand's sums; every k-th row kept for the plots.
 ///
 /// # Errors
 /// [`IdentifyError::Core`] from the model's regression, [`IdentifyError::Solve`] naming the
@@ -50,7 +50,7 @@ pub(super) fn least_squares(
     settings: &IdentifySettings,
 ) -> Result<LeastSquares, IdentifyError> {
     let clock = Instant::now();
-    let mut channels = compress(model, data)?;
+    let channels = compress(model, data)?;
     let p = model.params().len();
     let names: Vec<&str> = model.params().iter().map(|q| q.name).collect();
     // The channels' compressed problems are independent and tiny.
@@ -58,17 +58,21 @@ pub(super) fn least_squares(
     for ch in &channels {
         fits.push(solve_compressed(solver, ch, &names, settings)?);
     }
-    let thetas: Vec<DVector<f64>> = fits.iter().map(|f| f.theta.clone()).collect();
-    let spreads = spread(model, data, &mut channels, &thetas)?;
     let mut theta = vec![0.0; p];
     let mut std_err = vec![0.0; p];
     let mut bound_state = vec![BoundState::Free; p];
     let mut quality = Vec::with_capacity(fits.len());
-    for ((ch, fit), sp) in channels.iter().zip(&fits).zip(spreads) {
+    for (ch, fit) in channels.iter().zip(&fits) {
         let ch_names: Vec<&str> = ch.params.iter().map(|&i| names[i]).collect();
         let (xc, _) = ch.qr.compressed();
-        let meat = (data.lags > 0).then_some(sp.meat);
-        let cov = streaming::covariance(&xc, ch.qr.rows(), &ch_names, meat, sp.rss).map_err(
+        let meat = (data.lags > 0).then(|| {
+            let theta: Vec<f64> = fit.theta.iter().copied().collect();
+            ch.moments.as_ref().map_or_else(
+                || DMatrix::zeros(theta.len(), theta.len()),
+                |m| m.meat(&theta, &streaming::column_norms(&xc)),
+            )
+        });
+        let cov = streaming::covariance(&xc, ch.qr.rows(), &ch_names, meat, fit.rss).map_err(
             |source| IdentifyError::Solve {
                 channel: ch.name.into(),
                 source,
@@ -79,8 +83,9 @@ pub(super) fn least_squares(
             std_err[i] = cov[(j, j)].max(0.0).sqrt();
             bound_state[i] = fit.bound_state[j];
         }
-        let r2 = if sp.tss > 0.0 {
-            1.0 - sp.rss / sp.tss
+        let tss = ch.tss();
+        let r2 = if tss > 0.0 {
+            1.0 - fit.rss / tss
         } else {
             f64::NAN
         };
@@ -105,14 +110,71 @@ pub(super) fn least_squares(
     })
 }
 
-/// One channel's rows in pass 1: its QR factor, the sum of its regressand, and the rows kept
-/// for the plots.
+/// One channel's rows in pass 1: its QR factor, its window moments (the Newey–West meat at
+/// the θ̂ solved afterwards), the sums of its regressand about its first block's mean, and the
+/// rows kept for the plots.
 struct Channel {
     name: &'static str,
     params: Vec<usize>,
     qr: QrRows,
+    /// Made at the first block, around that block's least squares (the pilot).
+    moments: Option<WindowMoments>,
+    lags: usize,
+    /// The shift c (the first block's mean), Σ (y − c) and Σ (y − c)².
+    shift: Option<f64>,
     sum_y: f64,
+    sum_y2: f64,
     plot: PlotRows,
+}
+
+impl Channel {
+    /// Adds a block's rows to every sum.
+    ///
+    /// # Errors
+    /// [`IdentifyError::Solve`] naming the channel for a block the QR factor refuses.
+    fn push(&mut self, b: &ChannelRegression) -> Result<(), IdentifyError> {
+        self.qr
+            .push(&b.x, &b.y)
+            .map_err(|source| IdentifyError::Solve {
+                channel: self.name.into(),
+                source,
+            })?;
+        let moments = self.moments.get_or_insert_with(|| {
+            // The pilot: least squares on the first block (zeros if it does not determine θ).
+            let (x, y) = self.qr.compressed();
+            let k = x.ncols();
+            let names = vec![""; k];
+            let problem = LinearProblem {
+                x: &x,
+                y: &y,
+                names: &names,
+                bounds: None,
+                correlation_lags: 0,
+            };
+            let pilot = wheelid_solvers::Ols::default()
+                .solve(&problem)
+                .map(|f| f.theta.iter().copied().collect())
+                .unwrap_or_else(|_| vec![0.0; k]);
+            // The rows are whitened by the same rows' triangular factor.
+            WindowMoments::new(self.lags, &pilot, Some(&x.rows(0, k).into_owned()))
+        });
+        moments.push(&b.x, &b.y);
+        let c = *self
+            .shift
+            .get_or_insert_with(|| if b.y.is_empty() { 0.0 } else { b.y.mean() });
+        for y in b.y.iter() {
+            self.sum_y += y - c;
+            self.sum_y2 += (y - c) * (y - c);
+        }
+        self.plot.take(b);
+        Ok(())
+    }
+
+    /// Σ (y_t − ȳ)² over the rows pushed.
+    fn tss(&self) -> f64 {
+        let n = self.qr.rows().max(1) as f64;
+        (self.sum_y2 - self.sum_y * self.sum_y / n).max(0.0)
+    }
 }
 
 /// Pass 1: every recording's regression blocks into each channel's QR factor.
@@ -139,26 +201,19 @@ fn compress(
                             name: b.channel,
                             params: b.params.clone(),
                             qr: QrRows::new(b.x.ncols()),
+                            moments: None,
+                            lags: data.lags,
+                            shift: None,
                             sum_y: 0.0,
+                            sum_y2: 0.0,
                             plot: PlotRows::new(b, step),
                         })
                         .collect();
                 }
-                let pushed =
-                    channels
-                        .par_iter_mut()
-                        .zip(blocks.par_iter())
-                        .try_for_each(|(ch, b)| {
-                            ch.qr
-                                .push(&b.x, &b.y)
-                                .map_err(|source| IdentifyError::Solve {
-                                    channel: ch.name.into(),
-                                    source,
-                                })?;
-                            ch.sum_y += b.y.sum();
-                            ch.plot.take(b);
-                            Ok(())
-                        });
+                let pushed = channels
+                    .par_iter_mut()
+                    .zip(blocks.par_iter())
+                    .try_for_each(|(ch, b)| ch.push(b));
                 pushed.map_err(|e: IdentifyError| {
                     let message = e.to_string();
                     failed = Some(e);
@@ -206,80 +261,6 @@ fn solve_compressed(
         correlation_lags: 0,
     };
     solver.solve(&problem).map_err(fail)
-}
-
-/// Pass 2's sums for one channel at θ̂.
-struct Spread {
-    /// Newey–West meat of h_t = X̃_tᵀ e_t (the columns scaled by their norms).
-    meat: DMatrix<f64>,
-    /// Σ e_t².
-    rss: f64,
-    /// Σ (y_t − ȳ)².
-    tss: f64,
-}
-
-/// Pass 2: the residuals at each channel's θ̂ (`thetas`, in channel order), summed into
-/// [`Spread`]s, and the plot rows' fitted values.
-///
-/// # Errors
-/// As [`least_squares`].
-fn spread(
-    model: &dyn RegressorModel,
-    data: &Prepared<'_>,
-    channels: &mut [Channel],
-    thetas: &[DVector<f64>],
-) -> Result<Vec<Spread>, IdentifyError> {
-    struct Pass2 {
-        scales: Vec<f64>,
-        mean: f64,
-        nw: NeweyWest,
-        rss: f64,
-        tss: f64,
-        row: Vec<f64>,
-    }
-    let mut sums: Vec<Pass2> = channels
-        .iter()
-        .map(|ch| {
-            let k = ch.params.len();
-            Pass2 {
-                scales: streaming::column_norms(&ch.qr.compressed().0),
-                mean: ch.sum_y / ch.qr.rows().max(1) as f64,
-                nw: NeweyWest::new(k, data.lags),
-                rss: 0.0,
-                tss: 0.0,
-                row: vec![0.0; k],
-            }
-        })
-        .collect();
-    for c in &data.conditioned {
-        model.regression_blocks(c, &mut |blocks| {
-            sums.par_iter_mut()
-                .zip(blocks.par_iter())
-                .zip(thetas.par_iter())
-                .for_each(|((s, b), theta)| {
-                    let e = &b.y - &b.x * theta;
-                    // X is column-major: column j's rows are xs[j m .. (j + 1) m].
-                    let (m, xs) = (e.len(), b.x.as_slice());
-                    for (t, (&et, &yt)) in e.iter().zip(b.y.iter()).enumerate() {
-                        s.rss += et * et;
-                        s.tss += (yt - s.mean) * (yt - s.mean);
-                        for (j, (h, d)) in s.row.iter_mut().zip(&s.scales).enumerate() {
-                            *h = xs[j * m + t] / d * et;
-                        }
-                        s.nw.push(&s.row);
-                    }
-                });
-            Ok(())
-        })?;
-    }
-    Ok(sums
-        .into_iter()
-        .map(|s| Spread {
-            meat: s.nw.finish(),
-            rss: s.rss,
-            tss: s.tss,
-        })
-        .collect())
 }
 
 /// Every `step`-th row of a channel's stacked regression, for the plots.

@@ -108,11 +108,13 @@ fn preamble(input: &mut impl BufRead, source: &Path) -> Result<Preamble> {
 }
 
 /// Parses a recording from `input` (see [`Recording::from_csv_str`] for the format and the
-/// errors); `source` names it, `lines` finds line numbers for errors.
+/// errors) into `columns` (the others are not parsed, so not checked); `source` names it,
+/// `lines` finds line numbers for errors.
 pub(super) fn parse(
     mut input: impl BufRead,
     source: PathBuf,
     lines: &Lines<'_>,
+    columns: Columns,
 ) -> Result<Recording> {
     let Preamble {
         meta,
@@ -148,7 +150,10 @@ pub(super) fn parse(
         .iter()
         .map(|h| h.trim().to_owned())
         .collect();
-    let (req_idx, opt_idx) = column_indices(&headers, &source, header_line)?;
+    let (req_idx, mut opt_idx) = column_indices(&headers, &source, header_line)?;
+    if columns == Columns::Required {
+        opt_idx.fill(None);
+    }
     let mut req: [Vec<f64>; 5] = Default::default();
     let mut opt: Vec<Option<Vec<f64>>> = opt_idx.iter().map(|i| i.map(|_| Vec::new())).collect();
     let mut record = csv::ByteRecord::new();
@@ -310,15 +315,12 @@ pub(super) fn read_file_in(
     };
     let sequential = || -> Result<Recording> {
         let file = std::fs::File::open(path).map_err(io)?;
-        let mut rec = parse(
+        parse(
             std::io::BufReader::with_capacity(1 << 20, file),
             path.to_owned(),
             &Lines::File(path),
-        )?;
-        if columns == Columns::Required {
-            (rec.x, rec.y, rec.phi, rec.wl, rec.wr) = (None, None, None, None, None);
-        }
-        Ok(rec)
+            columns,
+        )
     };
     let len = std::fs::metadata(path).map_err(io)?.len();
     if len < min_bytes || parts < 2 {
@@ -414,6 +416,11 @@ fn parse_part(
     for (o, &i) in wanted.iter().enumerate() {
         *slot.get_mut(i)? = o;
     }
+    let cells = Cells {
+        slot: &slot,
+        width,
+        last: wanted.iter().max().map_or(0, |&i| i + 1),
+    };
     let mut buf = vec![0u8; 1 << 20];
     let (mut filled, mut first) = (0, true);
     loop {
@@ -438,8 +445,18 @@ fn parse_part(
             }
         };
         let mut start = 0;
-        for stop in memchr::memchr_iter(b'\n', &buf[..end]) {
-            parse_line(&buf[start..stop], &slot, width, &mut cols)?;
+        // Most chunks are plain ASCII with no quote and no carriage return: checked once here
+        // rather than line by line.
+        let chunk = &buf[..end];
+        if memchr::memchr2(b'"', b'\r', chunk).is_none() && chunk.is_ascii() {
+            for stop in memchr::memchr_iter(b'\n', chunk) {
+                plain_line(&buf[start..stop], &cells, &mut cols)?;
+                start = stop + 1;
+            }
+        }
+        let from = start;
+        for stop in memchr::memchr_iter(b'\n', &buf[from..end]).map(|i| from + i) {
+            parse_line(&buf[start..stop], &cells, &mut cols)?;
             start = stop + 1;
         }
         // The input's last line without a line end. The csv crate reads a `#` line there as a
@@ -448,7 +465,7 @@ fn parse_part(
             if buf[start] == b'#' {
                 return None;
             }
-            parse_line(&buf[start..end], &slot, width, &mut cols)?;
+            parse_line(&buf[start..end], &cells, &mut cols)?;
         }
         buf.copy_within(end..filled, 0);
         filled -= end;
@@ -458,9 +475,17 @@ fn parse_part(
     }
 }
 
+/// Where a row's cells go: `slot[i]` is cell i's output column (`usize::MAX`: skipped), of
+/// `width` cells a row; cells from `last` on are all skipped.
+struct Cells<'a> {
+    slot: &'a [usize],
+    width: usize,
+    last: usize,
+}
+
 /// One line (without its `\n`) of [`parse_part`] into `cols`; `None` where the csv crate might
 /// read it otherwise, or a cell is not a finite number, or time does not increase.
-fn parse_line(line: &[u8], slot: &[usize], width: usize, cols: &mut [Vec<f64>]) -> Option<()> {
+fn parse_line(line: &[u8], cells: &Cells<'_>, cols: &mut [Vec<f64>]) -> Option<()> {
     let line = line.strip_suffix(b"\r").unwrap_or(line);
     if line.is_empty() || (line[0] == b'#' && memchr::memchr(b'\r', line).is_none()) {
         return Some(());
@@ -469,10 +494,26 @@ fn parse_line(line: &[u8], slot: &[usize], width: usize, cols: &mut [Vec<f64>]) 
         return None;
     }
     if line.is_ascii() {
-        cells_ascii(line, slot, width, cols)?;
+        cells_ascii(line, cells, cols)?;
     } else {
-        cells_utf8(line, slot, width, cols)?;
+        cells_utf8(line, cells, cols)?;
     }
+    increasing(cols)
+}
+
+/// [`parse_line`] of a line known to be ASCII with no quote and no carriage return.
+#[inline]
+fn plain_line(line: &[u8], cells: &Cells<'_>, cols: &mut [Vec<f64>]) -> Option<()> {
+    if line.is_empty() || line[0] == b'#' {
+        return Some(());
+    }
+    cells_ascii(line, cells, cols)?;
+    increasing(cols)
+}
+
+/// Time (the first column) increases from the previous row to the last.
+#[inline]
+fn increasing(cols: &[Vec<f64>]) -> Option<()> {
     match cols[0].as_slice() {
         [.., p, q] if q <= p => None,
         _ => Some(()),
@@ -482,11 +523,12 @@ fn parse_line(line: &[u8], slot: &[usize], width: usize, cols: &mut [Vec<f64>]) 
 /// The cells of an ASCII line (which is UTF-8): each wanted one parsed from its bytes where it
 /// lies (`fast_float2`, the algorithm std's parser adopted, so the same values), the number
 /// required to end at the cell's end — else the cell is read as [`number`] reads it (blanks
-/// around it trimmed); the others skipped. `None` for a cell that is no finite number or a row
-/// of other than `width` cells.
-fn cells_ascii(line: &[u8], slot: &[usize], width: usize, cols: &mut [Vec<f64>]) -> Option<()> {
+/// around it trimmed); the others skipped, those after the last wanted one by counting their
+/// commas. `None` for a cell that is no finite number or a row of other than `width` cells.
+fn cells_ascii(line: &[u8], cells: &Cells<'_>, cols: &mut [Vec<f64>]) -> Option<()> {
+    let Cells { slot, width, last } = *cells;
     let mut at = 0;
-    for (cell, &o) in slot.iter().enumerate().take(width) {
+    for (cell, &o) in slot.iter().enumerate().take(last) {
         let rest = &line[at..];
         let end =
             |from: usize| from + memchr::memchr(b',', &rest[from..]).unwrap_or(rest.len() - from);
@@ -516,13 +558,22 @@ fn cells_ascii(line: &[u8], slot: &[usize], width: usize, cols: &mut [Vec<f64>])
             return None;
         }
     }
+    // The skipped cells after the last wanted one: width − last of them, so one comma fewer
+    // (`at` is past the comma that ends cell last − 1).
+    if last < width {
+        let commas = memchr::memchr_iter(b',', &line[at..]).count();
+        if commas + 1 != width - last {
+            return None;
+        }
+    }
     Some(())
 }
 
 /// [`cells_ascii`] for a line with other characters: one UTF-8 check for the line (a line that
 /// fails it goes back to the sequential reader, which checks cell by cell), then each wanted
 /// cell read as [`number`] reads it.
-fn cells_utf8(line: &[u8], slot: &[usize], width: usize, cols: &mut [Vec<f64>]) -> Option<()> {
+fn cells_utf8(line: &[u8], cells: &Cells<'_>, cols: &mut [Vec<f64>]) -> Option<()> {
+    let Cells { slot, width, .. } = *cells;
     // Commas are ASCII, so every cell is a `str` slice of the line.
     let text = std::str::from_utf8(line).ok()?;
     let (mut cell, mut start) = (0, 0);

@@ -85,50 +85,92 @@ struct Lane {
 /// the same operations in the same order as `sci_rs`' `sosfilt_dyn`, with the sections' state
 /// in registers for the usual orders.
 fn cascade(sos: &mut [Sos<f64>], data: &mut [f64], reverse: bool) {
-    fn run<const N: usize>(sos: &mut [Sos<f64>], data: &mut [f64], reverse: bool) {
-        let c: [[f64; 5]; N] = std::array::from_fn(|i| {
-            [
-                sos[i].b[0],
-                sos[i].b[1],
-                sos[i].b[2],
-                sos[i].a[1],
-                sos[i].a[2],
-            ]
+    cascade_lanes(&mut [sos], &mut [data], reverse);
+}
+
+/// Lanes a thread filters side by side ([`cascade_lanes`]).
+const LANES: usize = 3;
+
+/// [`cascade`] of up to [`LANES`] signals of one length at once, `sos[l]` over `data[l]`, in
+/// lock step: each lane's recursion is a chain of dependent operations whose latency, not the
+/// core's throughput, sets its speed, so lanes side by side cost about what one does. Each lane
+/// gets the same operations in the same order as alone. More lanes, or lanes of other lengths,
+/// are run in turn.
+fn cascade_lanes(sos: &mut [&mut [Sos<f64>]], data: &mut [&mut [f64]], reverse: bool) {
+    fn run<const N: usize, const L: usize>(
+        sos: &mut [&mut [Sos<f64>]],
+        data: &mut [&mut [f64]],
+        reverse: bool,
+    ) {
+        let c: [[[f64; 5]; N]; L] = std::array::from_fn(|l| {
+            std::array::from_fn(|i| {
+                let s = &sos[l][i];
+                [s.b[0], s.b[1], s.b[2], s.a[1], s.a[2]]
+            })
         });
-        let mut z: [[f64; 2]; N] = std::array::from_fn(|i| [sos[i].zi0, sos[i].zi1]);
-        let mut step = |v: &mut f64| {
-            let mut x = *v;
-            for i in 0..N {
-                let [b0, b1, b2, a1, a2] = c[i];
-                let y = b0 * x + z[i][0];
-                z[i][0] = b1 * x - a1 * y + z[i][1];
-                z[i][1] = b2 * x - a2 * y;
-                x = y;
+        let mut z: [[[f64; 2]; N]; L] =
+            std::array::from_fn(|l| std::array::from_fn(|i| [sos[l][i].zi0, sos[l][i].zi1]));
+        let len = data[0].len();
+        let mut step = |k: usize| {
+            for l in 0..L {
+                let mut x = data[l][k];
+                for i in 0..N {
+                    let [b0, b1, b2, a1, a2] = c[l][i];
+                    let y = b0 * x + z[l][i][0];
+                    z[l][i][0] = b1 * x - a1 * y + z[l][i][1];
+                    z[l][i][1] = b2 * x - a2 * y;
+                    x = y;
+                }
+                data[l][k] = x;
             }
-            *v = x;
         };
         if reverse {
-            data.iter_mut().rev().for_each(&mut step);
+            (0..len).rev().for_each(&mut step);
         } else {
-            data.iter_mut().for_each(&mut step);
+            (0..len).for_each(&mut step);
         }
-        for (s, [z0, z1]) in sos.iter_mut().zip(z) {
-            (s.zi0, s.zi1) = (z0, z1);
+        for (s, zl) in sos.iter_mut().zip(z) {
+            for (s, [z0, z1]) in s.iter_mut().zip(zl) {
+                (s.zi0, s.zi1) = (z0, z1);
+            }
         }
     }
-    match sos.len() {
-        1 => run::<1>(sos, data, reverse),
-        2 => run::<2>(sos, data, reverse),
-        3 => run::<3>(sos, data, reverse),
-        4 => run::<4>(sos, data, reverse),
-        5 => run::<5>(sos, data, reverse),
-        6 => run::<6>(sos, data, reverse),
+    fn sections<const L: usize>(
+        sos: &mut [&mut [Sos<f64>]],
+        data: &mut [&mut [f64]],
+        reverse: bool,
+    ) {
+        match sos[0].len() {
+            1 => run::<1, L>(sos, data, reverse),
+            2 => run::<2, L>(sos, data, reverse),
+            3 => run::<3, L>(sos, data, reverse),
+            4 => run::<4, L>(sos, data, reverse),
+            5 => run::<5, L>(sos, data, reverse),
+            6 => run::<6, L>(sos, data, reverse),
+            _ => {
+                for (sos, data) in sos.iter_mut().zip(data.iter_mut()) {
+                    let step = |v: &mut f64| *v = sci_rs::signal::filter::sosfilt_item(*v, sos);
+                    if reverse {
+                        data.iter_mut().rev().for_each(step);
+                    } else {
+                        data.iter_mut().for_each(step);
+                    }
+                }
+            }
+        }
+    }
+    let n = sos.len().min(data.len());
+    let (sos, data) = (&mut sos[..n], &mut data[..n]);
+    let alike = n <= LANES
+        && data.iter().all(|d| d.len() == data[0].len())
+        && sos.iter().all(|s| s.len() == sos[0].len());
+    match n {
+        0 => {}
+        2 if alike => sections::<2>(sos, data, reverse),
+        3 if alike => sections::<3>(sos, data, reverse),
         _ => {
-            let step = |v: &mut f64| *v = sci_rs::signal::filter::sosfilt_item(*v, &mut *sos);
-            if reverse {
-                data.iter_mut().rev().for_each(step);
-            } else {
-                data.iter_mut().for_each(step);
+            for l in 0..n {
+                sections::<1>(&mut sos[l..=l], &mut data[l..=l], reverse);
             }
         }
     }
@@ -228,14 +270,23 @@ pub fn sosfiltfilt_blocks<const S: usize, E: From<Error>>(
         let lo = a.saturating_sub(plan.halo);
         let hi = (b + plan.halo).min(n);
         let next_lo = b.saturating_sub(plan.halo);
-        let filter = |(lane, x): (&mut Lane, &BlockInput<'_>)| {
-            filter_block(lane, *x, n, padlen, &zi, (lo, hi, next_lo), plan.lookahead);
+        let filter = |(lanes, xs): (&mut [Lane], &[BlockInput<'_>])| {
+            filter_block(lanes, xs, n, padlen, &zi, (lo, hi, next_lo), plan.lookahead);
         };
         if (b - a) * S >= 1 << 16 {
             use rayon::prelude::*;
-            lanes.par_iter_mut().zip(inputs.par_iter()).for_each(filter);
+            // Groups of lanes, one a thread, each filtered side by side.
+            let groups = S.div_ceil(LANES).max(rayon::current_num_threads().min(S));
+            let size = S.div_ceil(groups);
+            lanes
+                .par_chunks_mut(size)
+                .zip(inputs.par_chunks(size))
+                .for_each(filter);
         } else {
-            lanes.iter_mut().zip(inputs.iter()).for_each(filter);
+            lanes
+                .chunks_mut(LANES)
+                .zip(inputs.chunks(LANES))
+                .for_each(filter);
         }
         let signals: [&[f64]; S] = std::array::from_fn(|s| lanes[s].out.as_slice());
         consume(FilteredBlock {
@@ -248,12 +299,12 @@ pub fn sosfiltfilt_blocks<const S: usize, E: From<Error>>(
     Ok(())
 }
 
-/// One lane's block: forward outputs from `lo` to the backward start (the state saved at
-/// `next_lo` for the next block), then the backward pass down to `lo`; the zero-phase outputs
-/// on [lo, hi) land in `lane.out`.
+/// One group of lanes' block (up to [`LANES`], side by side): forward outputs from `lo` to the
+/// backward start (the state saved at `next_lo` for the next block), then the backward pass
+/// down to `lo`; each lane's zero-phase outputs on [lo, hi) land in its `out`.
 fn filter_block(
-    lane: &mut Lane,
-    x: BlockInput<'_>,
+    lanes: &mut [Lane],
+    xs: &[BlockInput<'_>],
     n: usize,
     padlen: usize,
     zi: &[Sos<f64>],
@@ -268,26 +319,42 @@ fn filter_block(
         (hi + lookahead) as isize
     };
     let (lo_i, next_i) = (lo as isize, next_lo as isize);
-    // Bring the forward state from the cursor to `lo` (the first block's padding).
-    if lane.cursor < lo_i {
-        let mut pad = Vec::new();
-        extend_extended(x, n, lane.cursor..lo_i, &mut pad);
-        cascade(&mut lane.forward, &mut pad, false);
+    for (lane, &x) in lanes.iter_mut().zip(xs) {
+        // Bring the forward state from the cursor to `lo` (the first block's padding).
+        if lane.cursor < lo_i {
+            let mut pad = Vec::new();
+            extend_extended(x, n, lane.cursor..lo_i, &mut pad);
+            cascade(&mut lane.forward, &mut pad, false);
+        }
+        lane.buf.clear();
+        extend_extended(x, n, lo_i..end, &mut lane.buf);
+        lane.cursor = next_i;
     }
-    lane.buf.clear();
-    extend_extended(x, n, lo_i..end, &mut lane.buf);
     let split = (next_i - lo_i) as usize;
-    let (head, ahead) = lane.buf.split_at_mut(split);
-    cascade(&mut lane.forward, head, false);
+    {
+        let (mut states, mut heads) = (Vec::new(), Vec::new());
+        for lane in lanes.iter_mut() {
+            states.push(lane.forward.as_mut_slice());
+            heads.push(&mut lane.buf[..split]);
+        }
+        cascade_lanes(&mut states, &mut heads, false);
+    }
     // The next block starts from the state at `next_lo`; the lookahead runs on a copy.
-    let mut beyond = lane.forward.clone();
-    cascade(&mut beyond, ahead, false);
-    lane.cursor = next_i;
-    let last = lane.buf.last().copied().unwrap_or(0.0);
-    let mut backward = steady(zi, last);
-    cascade(&mut backward, &mut lane.buf, true);
-    lane.out.clear();
-    lane.out.extend_from_slice(&lane.buf[..hi - lo]);
+    let mut beyond: Vec<Vec<Sos<f64>>> = lanes.iter().map(|l| l.forward.clone()).collect();
+    let mut states: Vec<&mut [Sos<f64>]> = beyond.iter_mut().map(Vec::as_mut_slice).collect();
+    let mut aheads: Vec<&mut [f64]> = lanes.iter_mut().map(|l| &mut l.buf[split..]).collect();
+    cascade_lanes(&mut states, &mut aheads, false);
+    let mut backward: Vec<Vec<Sos<f64>>> = lanes
+        .iter()
+        .map(|l| steady(zi, l.buf.last().copied().unwrap_or(0.0)))
+        .collect();
+    let mut states: Vec<&mut [Sos<f64>]> = backward.iter_mut().map(Vec::as_mut_slice).collect();
+    let mut bufs: Vec<&mut [f64]> = lanes.iter_mut().map(|l| l.buf.as_mut_slice()).collect();
+    cascade_lanes(&mut states, &mut bufs, true);
+    for lane in lanes.iter_mut() {
+        lane.out.clear();
+        lane.out.extend_from_slice(&lane.buf[..hi - lo]);
+    }
 }
 
 #[cfg(test)]
@@ -336,24 +403,31 @@ mod tests {
                 let mut covered = 0;
                 let fx = |k: usize, out: &mut [f64]| out.copy_from_slice(&x[k..k + out.len()]);
                 let fx2 = |k: usize, out: &mut [f64]| out.copy_from_slice(&x2[k..k + out.len()]);
-                sosfiltfilt_blocks::<2, Error>(&sos, n, [&fx, &fx2], plan, |b| {
-                    assert_eq!(b.rows.start, covered, "blocks in order, no gap");
-                    assert_eq!(b.offset, b.rows.start.saturating_sub(halo));
-                    let hi = (b.rows.end + halo).min(n);
-                    for (s, w) in whole.iter().enumerate() {
-                        assert_eq!(b.signals[s].len(), hi - b.offset);
-                        for (j, v) in b.signals[s].iter().enumerate() {
-                            let k = b.offset + j;
-                            assert!(
-                                (v - w[k]).abs() < 1e-13,
-                                "n {n} block {block} signal {s} sample {k}: {v} vs {}",
-                                w[k]
-                            );
+                // Six signals: filtered side by side in groups.
+                sosfiltfilt_blocks::<6, Error>(
+                    &sos,
+                    n,
+                    [&fx, &fx2, &fx, &fx2, &fx, &fx2],
+                    plan,
+                    |b| {
+                        assert_eq!(b.rows.start, covered, "blocks in order, no gap");
+                        assert_eq!(b.offset, b.rows.start.saturating_sub(halo));
+                        let hi = (b.rows.end + halo).min(n);
+                        for (s, w) in whole.iter().cycle().take(6).enumerate() {
+                            assert_eq!(b.signals[s].len(), hi - b.offset);
+                            for (j, v) in b.signals[s].iter().enumerate() {
+                                let k = b.offset + j;
+                                assert!(
+                                    (v - w[k]).abs() < 1e-13,
+                                    "n {n} block {block} signal {s} sample {k}: {v} vs {}",
+                                    w[k]
+                                );
+                            }
                         }
-                    }
-                    covered = b.rows.end;
-                    Ok(())
-                })
+                        covered = b.rows.end;
+                        Ok(())
+                    },
+                )
                 .expect("filters");
                 assert_eq!(covered, n);
             }

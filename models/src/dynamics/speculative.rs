@@ -24,8 +24,10 @@ use super::FreeRun;
 
 /// Samples from which a free run is split into parts.
 pub(super) const MIN_SAMPLES: usize = 50_000;
-/// Most parts a free run is split into.
-pub(super) const MAX_PARTS: usize = 8;
+/// Parts a thread runs side by side ([`FreeRun::step_lanes`]).
+pub(super) const LANES: usize = 4;
+/// Most parts a free run is split into: [`LANES`] a thread on up to 8 threads.
+pub(super) const MAX_PARTS: usize = 8 * LANES;
 /// States kept at the start of each later part: the exact run must meet the part within this
 /// many samples (2¹⁶: 22 min at 50 Hz) or goes on alone to its end.
 const CHECK: usize = 1 << 16;
@@ -57,12 +59,22 @@ fn free_run_counted(run: &FreeRun<'_>, parts: usize) -> ([Vec<f64>; 2], usize) {
             let len = bounds[j + 1] - bounds[j];
             let (va, vb) = v_rest.split_at_mut(len);
             let (wa, wb) = w_rest.split_at_mut(len);
-            slices.push((bounds[j], va, wa));
+            slices.push(Slot {
+                start: bounds[j],
+                vs: va,
+                ws: wa,
+            });
             (v_rest, w_rest) = (vb, wb);
         }
-        slices
+        // LANES parts a thread, interleaved; a last group of fewer, one by one.
+        let mut groups: Vec<Vec<Slot<'_>>> = Vec::new();
+        let mut rest = slices.into_iter().peekable();
+        while rest.peek().is_some() {
+            groups.push(rest.by_ref().take(LANES).collect());
+        }
+        groups
             .into_par_iter()
-            .map(|(start, vs, ws)| run_part(run, start, vs, ws))
+            .flat_map_iter(|group| run_group(run, group))
             .collect()
     };
     let mut exact_end = runs[0].end;
@@ -88,25 +100,94 @@ fn free_run_counted(run: &FreeRun<'_>, parts: usize) -> ([Vec<f64>; 2], usize) {
     ([v, w], met)
 }
 
-/// Runs the samples `start … start + vs.len() − 1` into `vs`, `ws`: from the initial state
-/// when `start` is 0, else from a guess, keeping its first [`CHECK`] states.
-fn run_part(run: &FreeRun<'_>, start: usize, vs: &mut [f64], ws: &mut [f64]) -> Part {
-    let keep = if start == 0 { 0 } else { CHECK.min(vs.len()) };
-    let mut checks = Vec::with_capacity(keep);
-    let mut x = if start == 0 {
-        run.initial()
-    } else {
-        run.guess(start - 1)
-    };
-    for (i, (v, w)) in vs.iter_mut().zip(ws.iter_mut()).enumerate() {
-        let k = start + i;
-        let y = if k == 0 { x } else { run.step(k, &mut x) };
-        (*v, *w) = (y[0], y[1]);
-        if checks.len() < keep {
-            checks.push(x);
+/// One part's place: its first sample and its outputs.
+struct Slot<'a> {
+    start: usize,
+    vs: &'a mut [f64],
+    ws: &'a mut [f64],
+}
+
+/// A part's run under way: its slot, its state and the states kept so far.
+struct Lane<'a> {
+    slot: Slot<'a>,
+    x: [f64; 2],
+    /// Next sample to write (index in the part).
+    i: usize,
+    keep: usize,
+    checks: Vec<[f64; 2]>,
+}
+
+impl<'a> Lane<'a> {
+    /// From the initial state when the part starts at sample 0 (whose output it writes), else
+    /// from a guess, keeping its first [`CHECK`] states.
+    fn new(run: &FreeRun<'_>, slot: Slot<'a>) -> Self {
+        let start = slot.start;
+        let keep = if start == 0 {
+            0
+        } else {
+            CHECK.min(slot.vs.len())
+        };
+        let mut lane = Self {
+            x: if start == 0 {
+                run.initial()
+            } else {
+                run.guess(start - 1)
+            },
+            i: 0,
+            keep,
+            checks: Vec::with_capacity(keep),
+            slot,
+        };
+        if start == 0 && !lane.slot.vs.is_empty() {
+            let x = lane.x;
+            lane.write(x);
+        }
+        lane
+    }
+
+    fn left(&self) -> usize {
+        self.slot.vs.len() - self.i
+    }
+
+    /// Writes output `y` of the next sample and keeps the state if still checking.
+    fn write(&mut self, y: [f64; 2]) {
+        (self.slot.vs[self.i], self.slot.ws[self.i]) = (y[0], y[1]);
+        self.i += 1;
+        if self.checks.len() < self.keep {
+            self.checks.push(self.x);
         }
     }
-    Part { end: x, checks }
+
+    fn finish(mut self, run: &FreeRun<'_>) -> Part {
+        while self.left() > 0 {
+            let y = run.step(self.slot.start + self.i, &mut self.x);
+            self.write(y);
+        }
+        Part {
+            end: self.x,
+            checks: self.checks,
+        }
+    }
+}
+
+/// Parts run side by side on one thread: [`LANES`] of them in lock step
+/// ([`FreeRun::step_lanes`]) while each has samples left, the rest (and a smaller group) one by
+/// one; each gives what [`FreeRun::step`] sample after sample gives.
+fn run_group<'a>(run: &FreeRun<'_>, group: Vec<Slot<'a>>) -> Vec<Part> {
+    let mut lanes: Vec<Lane<'a>> = group.into_iter().map(|s| Lane::new(run, s)).collect();
+    if let Ok(four) = <&mut [Lane<'a>; LANES]>::try_from(lanes.as_mut_slice()) {
+        let common = four.iter().map(Lane::left).min().unwrap_or(0);
+        for _ in 0..common {
+            let ks = std::array::from_fn(|l| four[l].slot.start + four[l].i);
+            let mut xs = std::array::from_fn(|l| four[l].x);
+            let ys = run.step_lanes::<LANES>(ks, &mut xs);
+            for ((lane, x), y) in four.iter_mut().zip(xs).zip(ys) {
+                lane.x = x;
+                lane.write(y);
+            }
+        }
+    }
+    lanes.into_iter().map(|l| l.finish(run)).collect()
 }
 
 #[cfg(test)]
