@@ -239,6 +239,29 @@ mod tests {
     }
 
     #[test]
+    fn parts_side_by_side_on_jittered_stamps_give_the_serial_run() {
+        // Stamps 20 ms ± 5 ms apart: neighbouring intervals take 4 to 6 RK4 sub-steps, so the
+        // parts run side by side often differ in their plans and are stepped one by one there.
+        let mut rec = drive(true, false);
+        let mut t = 0.0;
+        for (k, tk) in rec.t.iter_mut().enumerate() {
+            *tk = t;
+            t += 0.02 + 0.005 * (((k * 7919) % 11) as f64 - 5.0) / 5.0;
+        }
+        let theta = [0.0228, 0.0568, -0.0001, 1.003, 0.0732, 0.9981];
+        let setup = setup(&theta, &rec, &[0.05, -0.2]).expect("valid");
+        let run = FreeRun::new(&setup, &rec);
+        let counts: std::collections::BTreeSet<usize> = (1..1000)
+            .map(|k| run.planner.plan(rec.t[k] - rec.t[k - 1]).equal)
+            .collect();
+        assert!(counts.len() >= 2, "{counts:?}");
+        let (serial, _) = free_run_counted(&run, 1);
+        let (split, met) = free_run_counted(&run, 8);
+        assert!(split == serial);
+        assert_eq!(met, 7);
+    }
+
+    #[test]
     fn a_model_that_does_not_forget_is_run_through_with_the_same_answer() {
         // θ4 = θ6 = 0: v and ω integrate their commands and never forget a wrong start; the
         // exact run meets no part and runs through each, with the serial numbers.
