@@ -322,6 +322,47 @@ pub(crate) fn bartlett_meat_rows(
     nw.finish()
 }
 
+/// [`bartlett_meat_rows`] with the rows cut into `parts` runs of consecutive rows summed at
+/// once on the available cores: each run's moving window is first filled with the L rows
+/// before it (not summed there), and only the last slides past the end; `g(t, out, scratch)`
+/// writes row t (`scratch`: each run's own buffer). The same sum, added in another order.
+pub(crate) fn bartlett_meat_parts(
+    n: usize,
+    k: usize,
+    lags: usize,
+    parts: usize,
+    g: impl Fn(usize, &mut [f64], &mut Vec<f64>) + Sync,
+) -> DMatrix<f64> {
+    use rayon::prelude::*;
+    let parts = parts.clamp(1, n.max(1));
+    let runs: Vec<NeweyWest> = (0..parts)
+        .into_par_iter()
+        .map(|j| {
+            let (a, b) = (j * n / parts, (j + 1) * n / parts);
+            let mut nw = NeweyWest::new(k, lags);
+            let (mut row, mut scratch) = (vec![0.0; k], Vec::new());
+            for t in a.saturating_sub(lags)..a {
+                g(t, &mut row, &mut scratch);
+                nw.preload(&row);
+            }
+            for t in a..b {
+                g(t, &mut row, &mut scratch);
+                nw.push(&row);
+            }
+            nw
+        })
+        .collect();
+    let mut runs = runs.into_iter().rev();
+    let Some(last) = runs.next() else {
+        return DMatrix::zeros(k, k);
+    };
+    let mut meat = last.finish();
+    for nw in runs {
+        meat += nw.sum() / (lags + 1) as f64;
+    }
+    meat
+}
+
 /// The Newey–West meat of the module doc, Σ_{|l| ≤ L} (1 − |l|/(L+1)) Σ_t g_t g_{t+l}ᵀ (k × k),
 /// over rows g_t pushed one at a time in order, by the moving sums B_s of L + 1 rows: it keeps
 /// the last L + 1 rows and nothing else, so the rows can come from a pass over data never
@@ -361,6 +402,10 @@ impl NeweyWest {
             2 => self.push_k::<2>(g),
             3 => self.push_k::<3>(g),
             4 => self.push_k::<4>(g),
+            5 => self.push_k::<5>(g),
+            6 => self.push_k::<6>(g),
+            7 => self.push_k::<7>(g),
+            8 => self.push_k::<8>(g),
             _ => self.push_any(g),
         }
     }
@@ -413,6 +458,28 @@ impl NeweyWest {
                 *mb += wa * wb;
             }
         }
+    }
+
+    /// Puts row g_t in the window without summing the window's products: a run of rows that
+    /// starts after others first takes the L rows before it this way.
+    fn preload(&mut self, g: &[f64]) {
+        let k = self.k;
+        let old = &mut self.ring[self.slot * k..(self.slot + 1) * k];
+        for ((b, x), new) in self.window.iter_mut().zip(old.iter_mut()).zip(&g[..k]) {
+            *b += new - *x;
+            *x = *new;
+        }
+        self.slot = if self.slot == self.lags {
+            0
+        } else {
+            self.slot + 1
+        };
+    }
+
+    /// Σ_s B_s B_sᵀ over the rows pushed so far (k × k, symmetric), not sliding past the last.
+    fn sum(&self) -> DMatrix<f64> {
+        let k = self.k;
+        DMatrix::from_fn(k, k, |a, b| self.m[a.min(b) * k + a.max(b)])
     }
 
     /// The meat (k × k, symmetric): the window slides L steps past the last row first (a
@@ -533,6 +600,15 @@ mod tests {
                 }
             });
             assert_relative_eq!(rows, direct, max_relative = 1e-12, epsilon = 1e-9);
+            // In runs of rows summed at once, each starting from the L rows before it.
+            for parts in [1, 2, 3, 7] {
+                let split = bartlett_meat_parts(n, 3, lags, parts, |t, out, _| {
+                    for (j, o) in out.iter_mut().enumerate() {
+                        *o = g[(t, j)];
+                    }
+                });
+                assert_relative_eq!(split, direct, max_relative = 1e-12, epsilon = 1e-9);
+            }
         }
     }
 

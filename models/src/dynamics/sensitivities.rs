@@ -101,8 +101,8 @@ fn integrate_columns<const M: usize, const Z: usize, const OFF: usize>(
             }
         });
         if avg {
-            let scale = 1.0 / span;
-            sink(k, &q.map(|x| x * scale));
+            // As the free run divides, so that its outputs are these bit for bit.
+            sink(k, &q.map(|x| x / span));
         } else {
             sink(k, &z);
         }

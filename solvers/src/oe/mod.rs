@@ -39,7 +39,10 @@
 //! bounds and weighting — and the full fit starts from that θ̂, so that its own iterations,
 //! each a simulation with sensitivities of every sample, are the few that move a nearly
 //! converged θ (the answer is the full fit's, to its tolerance, whatever the start). A head
-//! fit that fails leaves the start as given.
+//! fit that fails leaves the start as given. A long problem's points (from 400,000 residuals)
+//! are simulated with their sensitivities at once: a nearly converged fit takes nearly every
+//! step, and the normal equations at a step taken then need no second integration of the
+//! state (a step refused costs a sensitivity integration instead of a simulation).
 //!
 //! **Uncertainty.** At θ̂ the weighted Jacobian J (rows time-major: sample k, then channel c)
 //! and the weighted residuals e give the sandwich covariance
@@ -410,7 +413,7 @@ impl OutputError {
             max_evaluations: self.patience * (unknowns + 1),
         };
         let mut u = problem.u0.clone();
-        let mut point = problem.evaluated(&u).ok_or_else(|| {
+        let mut point = lm::NormalProblem::evaluate(&problem, &u).ok_or_else(|| {
             SolveError::InvalidProblem(format!(
                 "the model does not simulate (finitely) at θ = {:?}",
                 problem.theta_of(&u)

@@ -89,13 +89,24 @@ impl<M: DynamicModel + ?Sized> Problem<'_, M> {
     /// `None` if a simulation failed or diverged.
     pub fn evaluated(&self, u: &DVector<f64>) -> Option<Evaluated> {
         let theta = self.theta_of(u);
+        let sims = self
+            .recs
+            .iter()
+            .enumerate()
+            .map(|(r, rec)| {
+                self.model
+                    .simulate(&theta, rec, &self.initial_of(u, r))
+                    .ok()
+            })
+            .collect::<Option<Vec<Simulation>>>()?;
+        self.residuals_of(sims)
+    }
+
+    /// The residuals y − ŷ of the simulations `sims` (one per recording), or `None` if one is
+    /// not finite or not as long as its recording.
+    fn residuals_of(&self, sims: Vec<Simulation>) -> Option<Evaluated> {
         let mut out = Vec::with_capacity(self.recs.len());
-        let mut sims = Vec::with_capacity(self.recs.len());
-        for (r, rec) in self.recs.iter().enumerate() {
-            let sim = self
-                .model
-                .simulate(&theta, rec, &self.initial_of(u, r))
-                .ok()?;
+        for (rec, sim) in self.recs.iter().zip(&sims) {
             let meas = measured(rec);
             let mut per = Vec::with_capacity(sim.len());
             for (c, y) in sim.iter().enumerate() {
@@ -105,10 +116,36 @@ impl<M: DynamicModel + ?Sized> Problem<'_, M> {
                 per.push(meas[c].iter().zip(y).map(|(m, s)| m - s).collect());
             }
             out.push(per);
-            sims.push(sim);
         }
         Some(Evaluated { raw: out, sims })
     }
+
+    /// [`Problem::evaluated`] from the model's simulation with sensitivities, which are kept for
+    /// the normal equations at u (the same outputs: the state is integrated by the same
+    /// steps); `None` where the model has no sensitivities or a simulation fails (the caller
+    /// then simulates alone).
+    fn evaluated_with_sensitivities(&self, u: &DVector<f64>) -> Option<Evaluated> {
+        let theta = self.theta_of(u);
+        self.last_sensitivities.replace(None);
+        let mut sims = Vec::with_capacity(self.recs.len());
+        let mut all = Vec::with_capacity(self.recs.len());
+        for (r, rec) in self.recs.iter().enumerate() {
+            let (sim, sens) = self
+                .model
+                .simulate_with_sensitivities(&theta, rec, &self.initial_of(u, r))
+                .ok()??;
+            let finite = |m: &DMatrix<f64>| m.iter().all(|x| x.is_finite());
+            if !(sens.theta.iter().all(finite) && sens.initial.iter().all(finite)) {
+                return None;
+            }
+            sims.push(sim);
+            all.push(sens);
+        }
+        let point = self.residuals_of(sims)?;
+        self.last_sensitivities.replace(Some((u.clone(), all)));
+        Some(point)
+    }
+
     /// The weighted residual rows of `raw`: the cost's rows in order.
     pub fn weighted_rows(&self, raw: &Raw) -> DVector<f64> {
         let s = self.nch();
@@ -357,6 +394,10 @@ impl<M: DynamicModel + ?Sized> Problem<'_, M> {
     }
 }
 
+/// Residual rows from which a trial point is simulated with its sensitivities
+/// ([`NormalProblem::evaluate`]): a 1e6-sample fit's, not its head's.
+const OPTIMISTIC_ROWS: usize = 400_000;
+
 /// Σ_k s_k s_kᵀ (upper triangle, row-major m × m) and Σ_k s_k e_k over the samples `index`,
 /// s_k = (cols[0][k], …): on the available cores in fixed chunks summed in order.
 fn gram(cols: &[&[f64]], e: &[f64], index: &[usize]) -> (Vec<f64>, Vec<f64>) {
@@ -364,21 +405,10 @@ fn gram(cols: &[&[f64]], e: &[f64], index: &[usize]) -> (Vec<f64>, Vec<f64>) {
     let m = cols.len();
     let parts: Vec<(Vec<f64>, Vec<f64>)> = index
         .par_chunks(GRAM_CHUNK)
-        .map(|chunk| {
-            let (mut a, mut g, mut row) = (vec![0.0; m * m], vec![0.0; m], vec![0.0; m]);
-            for &k in chunk {
-                for (x, c) in row.iter_mut().zip(cols) {
-                    *x = c[k];
-                }
-                for i in 0..m {
-                    let ri = row[i];
-                    g[i] += ri * e[k];
-                    for j in i..m {
-                        a[i * m + j] += ri * row[j];
-                    }
-                }
-            }
-            (a, g)
+        .map(|chunk| match m {
+            6 => gram_chunk::<6>(cols, e, chunk),
+            8 => gram_chunk::<8>(cols, e, chunk),
+            _ => gram_chunk_any(cols, e, chunk),
         })
         .collect();
     let (mut a, mut g) = (vec![0.0; m * m], vec![0.0; m]);
@@ -389,10 +419,55 @@ fn gram(cols: &[&[f64]], e: &[f64], index: &[usize]) -> (Vec<f64>, Vec<f64>) {
     (a, g)
 }
 
+/// One chunk of [`gram`] for m = M columns, in registers: the same operations in the same
+/// order as [`gram_chunk_any`].
+fn gram_chunk<const M: usize>(cols: &[&[f64]], e: &[f64], chunk: &[usize]) -> (Vec<f64>, Vec<f64>) {
+    let cols: &[&[f64]; M] = cols.try_into().expect("M columns");
+    let (mut a, mut g) = ([[0.0; M]; M], [0.0; M]);
+    for &k in chunk {
+        let row: [f64; M] = std::array::from_fn(|i| cols[i][k]);
+        for i in 0..M {
+            let ri = row[i];
+            g[i] += ri * e[k];
+            for j in i..M {
+                a[i][j] += ri * row[j];
+            }
+        }
+    }
+    (a.iter().flatten().copied().collect(), g.to_vec())
+}
+
+/// One chunk of [`gram`], any number of columns.
+fn gram_chunk_any(cols: &[&[f64]], e: &[f64], chunk: &[usize]) -> (Vec<f64>, Vec<f64>) {
+    let m = cols.len();
+    let (mut a, mut g, mut row) = (vec![0.0; m * m], vec![0.0; m], vec![0.0; m]);
+    for &k in chunk {
+        for (x, c) in row.iter_mut().zip(cols) {
+            *x = c[k];
+        }
+        for i in 0..m {
+            let ri = row[i];
+            g[i] += ri * e[k];
+            for j in i..m {
+                a[i * m + j] += ri * row[j];
+            }
+        }
+    }
+    (a, g)
+}
+
 impl<M: DynamicModel + ?Sized> NormalProblem for Problem<'_, M> {
     type Point = Evaluated;
 
+    /// A long problem's point is simulated with its sensitivities at once (module doc of
+    /// [`super`], *Long recordings*): near the optimum nearly every step is taken, and the
+    /// normal equations there then need no second integration of the state.
     fn evaluate(&self, u: &DVector<f64>) -> Option<Evaluated> {
+        if self.rows >= OPTIMISTIC_ROWS
+            && let Some(point) = self.evaluated_with_sensitivities(u)
+        {
+            return Some(point);
+        }
         self.evaluated(u)
     }
 

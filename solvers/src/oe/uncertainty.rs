@@ -242,18 +242,24 @@ fn sandwich(
     let mut meat = DMatrix::zeros(k, k);
     for &(off, n) in spans {
         let r = jac.recording(off);
-        let mut buf = vec![0.0; k];
-        let g = |t: usize, out: &mut [f64]| {
+        let g = |t: usize, out: &mut [f64], buf: &mut Vec<f64>| {
+            buf.resize(k, 0.0);
             out.fill(0.0);
             for c in 0..nch {
                 let q = off + t * nch + c;
-                jac.row_of(r, q, &mut buf);
-                for (o, b) in out.iter_mut().zip(&buf) {
+                jac.row_of(r, q, buf);
+                for (o, b) in out.iter_mut().zip(buf.iter()) {
                     *o += b * e[q];
                 }
             }
         };
-        meat += ols::bartlett_meat_rows(n, k, lags, g);
+        // A long recording's instants in runs on the available cores.
+        let parts = if n >= 100_000 {
+            rayon::current_num_threads()
+        } else {
+            1
+        };
+        meat += ols::bartlett_meat_parts(n, k, lags, parts, g);
     }
     let dof = rows as f64 / (rows - k).max(1) as f64;
     &h_inv * meat * &h_inv * dof
