@@ -720,6 +720,10 @@ mod tests {
                 let free = simulate(&theta, &rec, &[0.05, -0.2]).expect("simulates");
                 assert!(y1 == free, "avg {avg}, θ {theta:?}");
                 assert!(s1.initial[0][(0, 0)] == 1.0 && s1.theta[1].iter().any(|x| *x != 0.0));
+                // The initial state is forgotten: its columns end exactly zero (the two-thread
+                // run drops them from there).
+                let last = rec.len() - 1;
+                assert!(s2.initial.iter().all(|m| m.row(last).iter().all(|x| *x == 0.0)));
             }
         }
     }
