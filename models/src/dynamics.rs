@@ -723,7 +723,11 @@ mod tests {
                 // The initial state is forgotten: its columns end exactly zero (the two-thread
                 // run drops them from there).
                 let last = rec.len() - 1;
-                assert!(s2.initial.iter().all(|m| m.row(last).iter().all(|x| *x == 0.0)));
+                assert!(
+                    s2.initial
+                        .iter()
+                        .all(|m| m.row(last).iter().all(|x| *x == 0.0))
+                );
             }
         }
     }

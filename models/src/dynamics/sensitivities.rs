@@ -78,7 +78,9 @@ fn integrate_columns<const M: usize, const Z: usize, const OFF: usize>(
     drop_dead: bool,
     sink: &mut impl FnMut(usize, &[f64], usize),
 ) -> Option<(usize, [f64; Z])> {
-    let Setup { th, n, hold, avg, .. } = *setup;
+    let Setup {
+        th, n, hold, avg, ..
+    } = *setup;
     if from == 0 {
         sink(0, &z, M);
     }
@@ -180,23 +182,19 @@ fn into_sensitivities((y, [tv, tw, iv, iw]): SensitivityColumns) -> ([Vec<f64>; 
     )
 }
 
-/// Writes a group's sample `k` (`z`: v, ω, then its `m` columns starting at `off` of [`ORDER`])
-/// into the outputs; `outputs`: whether this group writes (v, ω).
+/// Writes sample `k` of all the columns (`z`: v, ω, then the `m` columns of [`ORDER`]) into
+/// the outputs.
 fn write_sample(
     (y, [tv, tw, iv, iw]): (&mut [Vec<f64>; 2], [&mut DMatrix<f64>; 4]),
     k: usize,
     z: &[f64],
     m: usize,
-    off: usize,
-    outputs: bool,
 ) {
-    if outputs {
-        y[0][k] = z[0];
-        y[1][k] = z[1];
-    }
+    y[0][k] = z[0];
+    y[1][k] = z[1];
     for j in 0..m {
         let (sv, sw) = (z[2 + j], z[2 + m + j]);
-        match ORDER[off + j] {
+        match ORDER[j] {
             p @ 0..6 => {
                 tv[(k, p)] = sv;
                 tw[(k, p)] = sw;
@@ -217,7 +215,7 @@ pub(super) fn sensitivities_on_one_thread(
     let (mut y, [mut tv, mut tw, mut iv, mut iw]) = empty_columns(setup.n);
     let z = initial::<NS, { 2 + 2 * NS }, 0>(setup);
     integrate_columns::<NS, { 2 + 2 * NS }, 0>(setup, rec, (0, z), false, &mut |k, z, m| {
-        write_sample((&mut y, [&mut tv, &mut tw, &mut iv, &mut iw]), k, z, m, 0, true);
+        write_sample((&mut y, [&mut tv, &mut tw, &mut iv, &mut iw]), k, z, m);
     });
     into_sensitivities((y, [tv, tw, iv, iw]))
 }
