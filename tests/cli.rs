@@ -317,6 +317,35 @@ fn simulate_identify_track_from_config_and_flags() {
     );
 }
 
+/// `track --theta-hat` takes the six values comma-separated, as its help says (issue 17: it was
+/// rejected), and a wrong count is a clear error.
+#[test]
+fn track_takes_theta_hat_as_comma_separated_values() {
+    let o = wheelid(&[
+        "track",
+        "--theta-hat",
+        "0.4,0.1,0.01,1.1,0.01,0.9",
+        "--duration",
+        "2",
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON");
+    let th0: Vec<f64> = v["theta_hat0"]
+        .as_array()
+        .expect("theta_hat0")
+        .iter()
+        .map(|x| x.as_f64().expect("number"))
+        .collect();
+    assert_eq!(th0, [0.4, 0.1, 0.01, 1.1, 0.01, 0.9]);
+
+    let o = wheelid(&["track", "--theta-hat", "0.4,0.1", "--duration", "2"]);
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert!(e.contains("6 comma-separated values, got 2"), "{e}");
+    assert!(!e.contains("panicked"), "{e}");
+}
+
 /// The thesis's recipe on physics the model did not write: simulate the rigid-body Khepera-like
 /// robot, identify it (default estimator, no timing metadata needed), and track the figure eight
 /// on the same rigid-body robot with the identified θ̂. Measured: 7.5 mm RMS over 30 s from rest
