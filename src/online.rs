@@ -1,6 +1,6 @@
 //! Online identification of θ1…θ6 (Laut 2011 eq. 2.19) on board, one sample at a time, by
-//! recursive least squares with forgetting and a change detector
-//! (`wheelid_solvers::recursive`) on prefiltered regressors.
+//! recursive least squares — then recursive instrumental variables — with forgetting and a
+//! change detector (`wheelid_solvers::recursive`) on prefiltered regressors.
 //!
 //! The batch pipeline filters forward and backward and differentiates numerically; neither
 //! runs causally, and a causal derivative of sampled data is biased when the period is not

@@ -233,7 +233,8 @@ pub fn online_text(trace: &crate::run::OnlineTrace, id: &Identification) -> Stri
     let n = trace.t.len();
     let _ = writeln!(
         s,
-        "Online (recursive least squares while driving, {n} samples; wheelid::online):"
+        "Online (recursive least squares, then instrumental variables, while driving, {n} \
+         samples; wheelid::online):"
     );
     let (Some(th), Some(se)) = (trace.theta.last(), trace.std_err.last()) else {
         return s;
