@@ -315,6 +315,23 @@ impl OnlineTheta {
         [se(&d_lag), se(&d_coupling), se(&d_gain)]
     }
 
+    /// Whether both channels have run their warm-up since the start or their last alarm and
+    /// map to θ: from then on the intervals of [`OnlineTheta::std_err`] mean what they say.
+    pub fn settled(&self) -> bool {
+        (0..2).all(|i| self.since_reset[i] >= self.warmup && self.difference_equation(i).is_some())
+    }
+
+    /// The largest relative half-width of the 95 % intervals of θ1, θ2, θ4, θ6,
+    /// max 1.96 σ̂_i/|θ̂_i| \[-\]; infinite while any of them is undefined.
+    pub fn relative_half_width(&self) -> f64 {
+        let (th, se) = (self.theta(), self.std_err());
+        [0, 1, 3, 5]
+            .iter()
+            .map(|&i| 1.96 * se[i] / th[i].abs())
+            .map(|w| if w.is_finite() { w } else { f64::INFINITY })
+            .fold(0.0, f64::max)
+    }
+
     /// Alarms raised so far by the v and ω channels' detectors.
     pub fn changes(&self) -> [u64; 2] {
         [self.rls[0].changes(), self.rls[1].changes()]

@@ -236,6 +236,20 @@ pub fn online_text(trace: &crate::run::OnlineTrace, id: &Identification) -> Stri
         "Online (recursive least squares, then instrumental variables, while driving, {n} \
          samples; wheelid::online):"
     );
+    if let Some((target, reached)) = trace.accuracy {
+        let _ = match reached {
+            Some(t) => writeln!(
+                s,
+                "  stopped at {t:.1} s: the 95 % intervals of θ1, θ2, θ4, θ6 within {:.2} %",
+                100.0 * target
+            ),
+            None => writeln!(
+                s,
+                "  accuracy {:.2} % NOT reached within the run's duration",
+                100.0 * target
+            ),
+        };
+    }
     let (Some(th), Some(se)) = (trace.theta.last(), trace.std_err.last()) else {
         return s;
     };

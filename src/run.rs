@@ -382,7 +382,24 @@ struct RunFile {
     identify: IdentifySection,
     /// `[online]`: θ̂ estimated while driving ([`crate::online`]).
     online: Option<OnlineSettings>,
+    #[serde(default)]
+    stop_when: StopWhen,
+    /// With `stop_when = "accuracy"`: the relative half-width of the 95 % intervals to reach.
+    accuracy: Option<f64>,
     output: OutputSection,
+}
+
+/// When a run stops driving (`stop_when` in a run config).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StopWhen {
+    /// After `duration_s` (a replayed log: at its end).
+    #[default]
+    Duration,
+    /// Once the online estimator is settled ([`OnlineTheta::settled`]) and the 95 % intervals
+    /// of θ1, θ2, θ4, θ6 are within `accuracy` of θ̂ ([`OnlineTheta::relative_half_width`]),
+    /// at most `duration_s` (default 300 s). Turns the online estimator on.
+    Accuracy,
 }
 
 fn typed(name: &str) -> toml::Spanned<toml::Table> {
@@ -428,6 +445,9 @@ pub struct OnlineTrace {
     pub std_err: Vec<[f64; 6]>,
     /// Change alarms of the v and ω channels at each sample.
     pub change: Vec<[bool; 2]>,
+    /// With `stop_when = "accuracy"`: the target, and the time \[s\] it was reached (`None`:
+    /// not within the run's duration).
+    pub accuracy: Option<(f64, Option<f64>)>,
 }
 
 impl OnlineTrace {
@@ -618,18 +638,8 @@ pub fn run_with(path: &Path, observer: &dyn Observer, options: RunOptions) -> Re
         Some(e) => e.build()?,
         None => ExcitationConfig::ThesisPioneer.build()?,
     };
-    // A replayed log runs to its end unless told otherwise; a live robot 150 s.
-    let duration = match (file.duration_s, kind.as_str()) {
-        (Some(d), _) => Some(d),
-        (None, "replay") => None,
-        (None, _) => Some(150.0),
-    };
-    if let Some(d) = duration
-        && !(d.is_finite() && d > 0.0)
-    {
-        bail!("{}: duration_s = {d} must be > 0", path.display());
-    }
-    let mut online = online_estimator(file.online, options, robot.period_s(), path)?;
+    let duration = run_duration(&file, &kind, path)?;
+    let mut online = online_estimator(&file, options, robot.period_s(), path)?;
     let recording = drive_online(
         robot.as_mut(),
         &excitation,
@@ -687,26 +697,63 @@ pub fn run_with(path: &Path, observer: &dyn Observer, options: RunOptions) -> Re
     })
 }
 
-/// The online estimator a run asks for (its file's `[online]` table, or the defaults with
-/// `options.online`) for a robot sampled every `period_s`, with an empty trace; `None` when
-/// not asked for.
+/// How long a run drives: `duration_s`; else a replayed log to its end, a live robot 150 s,
+/// or at most 300 s with `stop_when = "accuracy"`.
 ///
 /// # Errors
-/// Invalid `[online]` settings, naming the file.
+/// A duration that is not positive, naming the file.
+fn run_duration(file: &RunFile, kind: &str, path: &Path) -> Result<Option<f64>> {
+    let duration = match (file.duration_s, kind, file.stop_when) {
+        (Some(d), _, _) => Some(d),
+        (None, "replay", _) => None,
+        (None, _, StopWhen::Accuracy) => Some(300.0),
+        (None, _, StopWhen::Duration) => Some(150.0),
+    };
+    if let Some(d) = duration
+        && !(d.is_finite() && d > 0.0)
+    {
+        bail!("{}: duration_s = {d} must be > 0", path.display());
+    }
+    Ok(duration)
+}
+
+/// The online estimator a run asks for (its file's `[online]` table, or the defaults with
+/// `options.online` or `stop_when = "accuracy"`) for a robot sampled every `period_s`, with
+/// an empty trace (carrying the accuracy target); `None` when not asked for.
+///
+/// # Errors
+/// Invalid `[online]` settings; `stop_when = "accuracy"` without an `accuracy` in (0, 1), or
+/// an `accuracy` without it; naming the file.
 fn online_estimator(
-    table: Option<OnlineSettings>,
+    file: &RunFile,
     options: RunOptions,
     period_s: f64,
     path: &Path,
 ) -> Result<Option<(OnlineTheta, OnlineTrace)>> {
-    let settings = match (table, options.online) {
+    let accuracy = match (file.stop_when, file.accuracy) {
+        (StopWhen::Accuracy, Some(a)) if a > 0.0 && a < 1.0 => Some(a),
+        (StopWhen::Accuracy, a) => bail!(
+            "{}: stop_when = \"accuracy\" needs accuracy in (0, 1) (e.g. 0.01), has {a:?}",
+            path.display()
+        ),
+        (StopWhen::Duration, Some(_)) => bail!(
+            "{}: accuracy is read only with stop_when = \"accuracy\"",
+            path.display()
+        ),
+        (StopWhen::Duration, None) => None,
+    };
+    let settings = match (file.online, options.online || accuracy.is_some()) {
         (Some(o), _) => o,
         (None, true) => OnlineSettings::default(),
         (None, false) => return Ok(None),
     };
     let est = OnlineTheta::new(settings, period_s)
         .with_context(|| format!("{}: [online]", path.display()))?;
-    Ok(Some((est, OnlineTrace::default())))
+    let trace = OnlineTrace {
+        accuracy: accuracy.map(|a| (a, None)),
+        ..OnlineTrace::default()
+    };
+    Ok(Some((est, trace)))
 }
 
 /// The model and the solver (with its bounds) the config's `[model]` and `[solver]` tables
@@ -876,7 +923,9 @@ pub fn drive(
 }
 
 /// [`drive`], feeding every sample to an online estimator as it comes and keeping its θ̂ in
-/// `trace`; the observer's message then carries θ̂1, θ̂2.
+/// `trace`; the observer's message then carries θ̂1, θ̂2. Where the trace carries an accuracy
+/// target (`stop_when = "accuracy"`), the drive stops at the first sample at which the
+/// estimator is settled and its intervals are within it, and the trace says when.
 ///
 /// # Errors
 /// As [`drive`].
@@ -927,6 +976,13 @@ pub fn drive_online(
                     trace.change.push(u.change);
                     let msg = format!("driving · online θ̂1 {:.4} θ̂2 {:.4}", th[0], th[1]);
                     observer.progress(&msg, k as u64 + 1, planned);
+                    if let Some((target, reached)) = &mut trace.accuracy
+                        && est.settled()
+                        && est.relative_half_width() <= *target
+                    {
+                        *reached = Some(o.t - t0);
+                        break;
+                    }
                 }
                 None => observer.progress("driving", k as u64 + 1, planned),
             }

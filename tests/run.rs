@@ -268,6 +268,46 @@ fn plugin_config(lib: &Path, dir: &Path) -> PathBuf {
     path
 }
 
+/// `stop_when = "accuracy"` (issue 18, sequential identification): the rigid-body Khepera is
+/// driven until the online 95 % intervals of θ1, θ2, θ4, θ6 are within 1 % — long before the
+/// 120 s cap — and θ̂ there, and the batch answer on that drive, are within 1 % of the map.
+/// Without an accuracy, or an accuracy without the rule, the config is a clear error.
+#[test]
+fn a_run_stops_once_the_online_intervals_reach_the_accuracy() {
+    let out = run(&config("run_physics_until_accurate.toml"), &Silent).expect("runs");
+    let trace = out.online.expect("online trace");
+    let (target, reached) = trace.accuracy.expect("an accuracy target");
+    let t = reached.expect("reached within 120 s");
+    let duration = out.recording.t[out.recording.len() - 1] - out.recording.t[0];
+    eprintln!("stopped at {t:.2} s (recording {duration:.2} s)");
+    assert_eq!(target, 0.01);
+    assert!(
+        t < 60.0 && (duration - t).abs() < 0.1,
+        "{t} s, {duration} s"
+    );
+    let map = wheelid::robots::physics::PhysicalProfile::khepera3().theta();
+    let (th, se) = (
+        trace.theta.last().expect("θ̂"),
+        trace.std_err.last().expect("σ̂"),
+    );
+    for i in [0, 1, 3, 5] {
+        assert!(1.96 * se[i] <= 0.01 * th[i].abs(), "θ{} interval", i + 1);
+    }
+    assert_close(th, &map, 0.01, "online at the stop");
+    assert_close(&out.identification.theta, &map, 0.01, "batch at the stop");
+    let head = "duration_s = 5.0\n[robot]\ntype = \"simulator\"\n[output]\ndir = \"o\"\n";
+    let e = run_text(&format!("stop_when = \"accuracy\"\n{head}"));
+    assert!(
+        e.contains("bad.toml: stop_when = \"accuracy\" needs accuracy in (0, 1)"),
+        "{e}"
+    );
+    let e = run_text(&format!("accuracy = 0.01\n{head}"));
+    assert!(
+        e.contains("bad.toml: accuracy is read only with stop_when"),
+        "{e}"
+    );
+}
+
 #[test]
 fn every_example_config_is_a_run_config_and_the_plugin_one_runs_as_its_comment_says() {
     // Configs for other commands live apart (examples/diagnose/); each one here parses.
