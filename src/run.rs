@@ -8,6 +8,8 @@
 //! ```toml
 //! plugins = ["wheelid_turtlebot_plugin"]  # optional: a name beside the executable, or a path
 //! duration_s = 120.0
+//! stop_when = "duration"  # or "accuracy": until the online 95 % intervals of θ1, θ2, θ4, θ6
+//! # accuracy = 0.01       #   are within this of θ̂, at most duration_s ([`StopWhen`])
 //!
 //! [robot]                 # type: simulator | replay | pioneer | khepera | a plugin's
 //! type = "simulator"
@@ -32,6 +34,7 @@
 //!
 //! [online]                # optional (or `run --online`): θ̂ while driving, online.csv
 //! memory_s = 60.0         # wheelid::online::OnlineSettings
+//! form = "instrumental_variables"   # or "least_squares"
 //!
 //! [output]
 //! dir = "run-out"         # recording.csv, model.toml, report.txt, report.json
