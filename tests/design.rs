@@ -22,6 +22,15 @@ fn seeds() -> u64 {
         .unwrap_or(6)
 }
 
+/// The first seed (env `WHEELID_DESIGN_FIRST_SEED`, default 1; seeds 1–6 were looked at while
+/// choosing the design's settings, 21 on were not).
+fn first_seed() -> u64 {
+    std::env::var("WHEELID_DESIGN_FIRST_SEED")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(1)
+}
+
 /// θ from `seeds` drives of `exc` for `duration_s`, with white noise of `wheel_noise` \[m/s\]
 /// on each reported wheel speed; and the largest |x|, |y| of the recorded pose.
 fn drive(
@@ -32,7 +41,7 @@ fn drive(
     wheel_noise: f64,
 ) -> (Vec<Vec<f64>>, [f64; 2]) {
     let mut extent = [0.0f64; 2];
-    let thetas = (1..=seeds())
+    let thetas = (first_seed()..first_seed() + seeds())
         .map(|seed| {
             let s = PhysicsSettings {
                 duration_s,
@@ -89,8 +98,9 @@ fn designed_drive(name: &str) {
         s.accuracy = 0.02 / 4.0;
         let d = design(model.as_ref(), &s).expect("designs");
         eprintln!(
-            "{name}: {} s, predicted se {:.5?}, extent {:.2?} m, {} candidates",
-            d.duration_s, d.predicted_std_err, d.extent_m, d.evaluations
+            "{name}: {} s on lines to {:.2} Hz, predicted se {:.5?}, extent {:.2?} m, {} \
+             candidates",
+            d.duration_s, d.f_max_hz, d.predicted_std_err, d.extent_m, d.evaluations
         );
         assert!(d.duration_s <= 45.0, "{} s", d.duration_s);
         let (thetas, extent) = drive(&p, model.as_ref(), &d.excitation, d.duration_s, wheel_noise);
@@ -128,7 +138,14 @@ fn designed_drive(name: &str) {
                 d.predicted_std_err[i]
             );
             assert!(worst(&thetas) < 2.0, "θ{}", i + 1);
-            if seeds() >= 20 {}
+            // The spread against the prediction is read on 20 seeds or more (6 are too few).
+            if seeds() >= 20 {
+                assert!(
+                    (ratio - 1.0).abs() <= 0.3,
+                    "θ{}: spread / predicted {ratio:.2}",
+                    i + 1
+                );
+            }
         }
     }
 }
@@ -138,11 +155,10 @@ fn a_designed_drive_identifies_the_pioneer_within_two_percent_in_45_s() {
     designed_drive("pioneer3dx");
 }
 
-/// Not met (issue 18): on the rigid-body Khepera-like robot the designed 20 s drive leaves θ1,
-/// θ2 biased by −2 to −3 % (the spread is as predicted; the bias is the model's, excited by the
-/// design's lines above the bandwidth). Run with `--include-ignored`.
+/// The rigid-body Khepera-like robot: on lines to half its bandwidth (the default band) the
+/// designed drive is 40 s. (On lines to twice it, the design before 2026-11-25, a 20 s drive
+/// left θ1 −2 % and θ6 +7 %: the model's bias, excited above the bandwidth.)
 #[test]
-#[ignore = "issue 18: the Khepera-like robot's designed drive is biased 2-3 % (not met)"]
 fn a_designed_drive_identifies_the_khepera_within_two_percent_in_45_s() {
     designed_drive("khepera3");
 }

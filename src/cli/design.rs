@@ -89,10 +89,12 @@ pub(crate) fn run_design(a: DesignArgs) -> Result<()> {
     .context("built-in model")?;
     let d = design(model.as_ref(), &s)?;
     out!(
-        "Designed experiment for {} ({} candidates): drive {:.0} s, pose within ±{:.2} m × ±{:.2} m",
+        "Designed experiment for {} ({} candidates): drive {:.0} s on lines up to {:.2} Hz, pose \
+         within ±{:.2} m × ±{:.2} m",
         robot.name,
         d.evaluations,
         d.duration_s,
+        d.f_max_hz,
         d.extent_m[0],
         d.extent_m[1]
     );
