@@ -85,10 +85,8 @@ impl Default for OnlineSettings {
     }
 }
 
-/// The raw signals: u and y of each channel, n (ω², v ω).
-const RAW: usize = 6;
-
-/// The filtered signals: the raw ones and the simulated v̂, ω̂, ω̂², v̂ ω̂.
+/// The filtered signals: u and y of each channel, n (ω², v ω), and the auxiliary model's v̂,
+/// ω̂, ω̂², v̂ ω̂.
 const SIGNALS: usize = 10;
 
 /// What one update did.
@@ -116,8 +114,8 @@ pub struct OnlineTheta {
     /// The auxiliary model's (v̂, ω̂) at the last sample (the measured ones where a channel
     /// is still in its warm-up).
     sim: [f64; 2],
-    /// The raw signals of the last two samples (newest first), once there.
-    raw: [Option<[f64; RAW]>; 2],
+    /// The commands (v_ref, ω_ref) of the last two samples (newest first), once there.
+    commands: [Option<[f64; 2]>; 2],
     /// Samples each channel has taken since the start or its last alarm.
     since_reset: [u64; 2],
     /// Samples of warm-up before `form`.
@@ -174,7 +172,7 @@ impl OnlineTheta {
             dt: dt_s,
             form: settings.form,
             sim: [0.0; 2],
-            raw: [None; 2],
+            commands: [None; 2],
             since_reset: [0; 2],
             warmup: ((settings.warmup_s.max(0.0) / dt_s).ceil() as u64).max(1),
         })
@@ -190,7 +188,7 @@ impl OnlineTheta {
         }
         let raw = [v_ref, w_ref, v, w, w * w, v * w];
         let refined = [self.refined(0), self.refined(1)];
-        self.sim = self.simulate(&raw, refined);
+        self.sim = self.simulate([v, w], refined);
         let [vh, wh] = self.sim;
         let p = self.pole;
         let mut now = [0.0; SIGNALS];
@@ -200,7 +198,7 @@ impl OnlineTheta {
             s[1] = p * s[1] + (1.0 - p) * s[0];
             *f = s[1];
         }
-        self.raw = [Some(raw), self.raw[0]];
+        self.commands = [Some([v_ref, w_ref]), self.commands[0]];
         let [Some(q), Some(o)] = self.last else {
             self.last = [Some(now), self.last[0]];
             return quiet;
@@ -237,9 +235,8 @@ impl OnlineTheta {
     /// The auxiliary model's (v̂, ω̂) at this sample (module docs, "Instruments"): one step of
     /// each instrumented channel's difference equation from the last sample; the measured
     /// value where a channel is not instrumented (so that its model starts from the robot).
-    fn simulate(&self, raw: &[f64; RAW], refined: [bool; 2]) -> [f64; 2] {
-        let measured = [raw[2], raw[3]];
-        let [Some(r0), older] = self.raw else {
+    fn simulate(&self, measured: [f64; 2], refined: [bool; 2]) -> [f64; 2] {
+        let [Some(r0), older] = self.commands else {
             return measured;
         };
         let r1 = older.unwrap_or(r0);
