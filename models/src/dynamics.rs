@@ -557,20 +557,28 @@ impl<'a> FreeRun<'a> {
         [self.rec.v[k], self.rec.w[k]].map(|x| if x.is_finite() { x } else { 0.0 })
     }
 
-    /// Advances the state `x` from t_{k−1} to t_k (k ≥ 1) and returns output sample k: the
-    /// state, or its window average when the recording samples so.
+    /// Eq. 2.19 as `accel` at this run's θ, multiplying by 1/θ1, 1/θ2 (the step's critical
+    /// path): (v, ω) and the command (v_ref, ω_ref) → (v̇, ω̇).
     #[inline]
-    pub(crate) fn step(&self, k: usize, x: &mut [f64; 2]) -> [f64; 2] {
+    fn field(&self) -> impl Fn(&[f64; 2], (f64, f64)) -> [f64; 2] + Copy {
         let [_, _, t3, t4, t5, t6] = self.th;
         let [i1, i2] = self.inv;
-        // eq. 2.19 as `accel`, multiplying by 1/θ1, 1/θ2 (the step's critical path).
-        let f = |x: &[f64; 2], u: (f64, f64)| {
+        move |x: &[f64; 2], u: (f64, f64)| {
             let [v, w] = *x;
             [
                 (t3 * w * w - t4 * v + u.0) * i1,
                 (-t5 * v * w - t6 * w + u.1) * i2,
             ]
-        };
+        }
+    }
+
+    /// Advances the state `x` from t_{k−1} to t_k (k ≥ 1) and returns output sample k: the
+    /// state, or its window average when the recording samples so.
+    #[inline]
+    pub(crate) fn step(&self, k: usize, x: &mut [f64; 2]) -> [f64; 2] {
+        let [_, _, _, t4, t5, t6] = self.th;
+        let [i1, i2] = self.inv;
+        let f = self.field();
         let mut q = [0.0; 2];
         let span = for_each_substep(
             self.rec,
@@ -607,15 +615,7 @@ impl<'a> FreeRun<'a> {
         if equal == 0 || plans.iter().any(|p| p.equal != equal) {
             return std::array::from_fn(|l| self.step(ks[l], &mut xs[l]));
         }
-        let [_, _, t3, t4, t5, t6] = self.th;
-        let [i1, i2] = self.inv;
-        let f = |x: &[f64; 2], u: (f64, f64)| {
-            let [v, w] = *x;
-            [
-                (t3 * w * w - t4 * v + u.0) * i1,
-                (-t5 * v * w - t6 * w + u.1) * i2,
-            ]
-        };
+        let f = self.field();
         let commands = ks.map(|k| {
             let ua = (self.rec.v_ref[k - 1], self.rec.w_ref[k - 1]);
             let ub = match self.hold {

@@ -435,18 +435,7 @@ impl NeweyWest {
     }
 
     fn push_any(&mut self, g: &[f64]) {
-        let k = self.k;
-        let old = &mut self.ring[self.slot * k..(self.slot + 1) * k];
-        // The slot held row t − (L + 1), which leaves the window now (zero before it filled).
-        for ((b, x), new) in self.window.iter_mut().zip(old.iter_mut()).zip(&g[..k]) {
-            *b += new - *x;
-            *x = *new;
-        }
-        self.slot = if self.slot == self.lags {
-            0
-        } else {
-            self.slot + 1
-        };
+        self.preload(g);
         self.accumulate();
     }
 
@@ -465,6 +454,7 @@ impl NeweyWest {
     fn preload(&mut self, g: &[f64]) {
         let k = self.k;
         let old = &mut self.ring[self.slot * k..(self.slot + 1) * k];
+        // The slot held row t − (L + 1), which leaves the window now (zero before it filled).
         for ((b, x), new) in self.window.iter_mut().zip(old.iter_mut()).zip(&g[..k]) {
             *b += new - *x;
             *x = *new;
