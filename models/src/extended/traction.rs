@@ -32,7 +32,9 @@ const STEPS_PER_TAU: f64 = 40.0;
 /// One step of Verwer's two-stage Rosenbrock method ROS2 (γ = 1 + 1/√2; 2nd order,
 /// L-stable; Verwer, Spee, Blom & Hundsdorfer, SIAM J. Sci. Comput. 20 (1999) 1456) on
 /// ż = f(z, u) over `h`, ending under `u1`, given f and its Jacobian ∂f/∂z at the step's start
-/// (`start`); adds the trapezoidal ∫z over the step to `q`.
+/// (`start`); adds the trapezoidal ∫z over the step to `q`. The Jacobian's body rows must not
+/// depend on the body speeds (∂ż₀,₁/∂z₀,₁ = 0, as [`Contact::rhs`] gives it): W = I − γhJ is
+/// then solved by its 2×2 Schur complement ([`Ros2Matrix`]).
 fn ros2_step<U>(
     f: impl Fn(&[f64; 4], &U) -> [f64; 4],
     start: ([f64; 4], nalgebra::Matrix4<f64>),
@@ -43,23 +45,81 @@ fn ros2_step<U>(
 ) {
     const GAMMA: f64 = 1.0 + std::f64::consts::FRAC_1_SQRT_2;
     let (f0, jac) = start;
-    let w = nalgebra::Matrix4::<f64>::identity() - GAMMA * h * jac;
-    let Some(lu) = Some(w.lu()).filter(|lu| lu.is_invertible()) else {
+    debug_assert!(jac.fixed_view::<2, 2>(0, 0).iter().all(|&x| x == 0.0));
+    let Some(w) = Ros2Matrix::new(&jac, GAMMA * h) else {
         z.iter_mut().for_each(|x| *x = f64::NAN);
         return;
     };
-    let solve = |b: [f64; 4]| {
-        lu.solve(&nalgebra::Vector4::from(b))
-            .map_or([f64::NAN; 4], |x| [x[0], x[1], x[2], x[3]])
-    };
-    let k1 = solve(f0);
+    let k1 = w.solve(f0);
     let z1: [f64; 4] = std::array::from_fn(|i| z[i] + h * k1[i]);
     let f1 = f(&z1, u1);
-    let k2 = solve(std::array::from_fn(|i| f1[i] - 2.0 * k1[i]));
+    let k2 = w.solve(std::array::from_fn(|i| f1[i] - 2.0 * k1[i]));
     let start = *z;
     for i in 0..4 {
         z[i] += h * (1.5 * k1[i] + 0.5 * k2[i]);
         q[i] += 0.5 * h * (start[i] + z[i]);
+    }
+}
+
+/// W = I − g J for a Jacobian J whose body block ∂ż₀,₁/∂z₀,₁ is zero:
+/// W = [[I, B], [C, D]] with B = −g J₀₁,₂₃, C = −g J₂₃,₀₁, D = I − g J₂₃,₂₃, solved through
+/// the inverse of its Schur complement S = D − C B (2×2; det W = det S). Exact block
+/// elimination, no pivoting needed: the leading block is the identity.
+struct Ros2Matrix {
+    b: [[f64; 2]; 2],
+    c: [[f64; 2]; 2],
+    /// S⁻¹.
+    s_inv: [[f64; 2]; 2],
+}
+
+impl Ros2Matrix {
+    /// `None` where S is singular or not finite.
+    #[inline(always)]
+    fn new(jac: &nalgebra::Matrix4<f64>, g: f64) -> Option<Self> {
+        let b = [
+            [-g * jac[(0, 2)], -g * jac[(0, 3)]],
+            [-g * jac[(1, 2)], -g * jac[(1, 3)]],
+        ];
+        let c = [
+            [-g * jac[(2, 0)], -g * jac[(2, 1)]],
+            [-g * jac[(3, 0)], -g * jac[(3, 1)]],
+        ];
+        let d = [
+            [1.0 - g * jac[(2, 2)], -g * jac[(2, 3)]],
+            [-g * jac[(3, 2)], 1.0 - g * jac[(3, 3)]],
+        ];
+        let s: [[f64; 2]; 2] = std::array::from_fn(|i| {
+            std::array::from_fn(|j| d[i][j] - c[i][0] * b[0][j] - c[i][1] * b[1][j])
+        });
+        let det = s[0][0] * s[1][1] - s[0][1] * s[1][0];
+        let scale = s.iter().flatten().fold(0.0_f64, |m, x| m.max(x.abs()));
+        if !(det.is_finite() && det.abs() > f64::EPSILON * scale * scale) {
+            return None;
+        }
+        let s_inv = [
+            [s[1][1] / det, -s[0][1] / det],
+            [-s[1][0] / det, s[0][0] / det],
+        ];
+        Some(Self { b, c, s_inv })
+    }
+
+    /// x with W x = r.
+    #[inline(always)]
+    fn solve(&self, r: [f64; 4]) -> [f64; 4] {
+        let (b, c, s) = (&self.b, &self.c, &self.s_inv);
+        // [x₀₁; x₂₃]: S x₂₃ = r₂₃ − C r₀₁, x₀₁ = r₀₁ − B x₂₃.
+        let y = [
+            r[2] - c[0][0] * r[0] - c[0][1] * r[1],
+            r[3] - c[1][0] * r[0] - c[1][1] * r[1],
+        ];
+        let x2 = s[0][0] * y[0] + s[0][1] * y[1];
+        let x3 = s[1][0] * y[0] + s[1][1] * y[1];
+        [
+            r[0] - b[0][0] * x2 - b[0][1] * x3,
+            r[1] - b[1][0] * x2 - b[1][1] * x3,
+            x2,
+            x3,
+        ]
     }
 }
 
@@ -228,6 +288,46 @@ mod tests {
     use super::*;
     use crate::effects::Candidate;
     use wheelid_core::DynamicModel;
+
+    /// The Schur-complement solve of W = I − gJ against nalgebra's pivoted LU, on a stiff J
+    /// with a zero body block (as the contact's): agreement to rounding.
+    #[test]
+    fn ros2_matrix_solves_as_lu_does() {
+        let jac = nalgebra::Matrix4::new(
+            0.0, 0.0, 812.0, 790.0, //
+            0.0, 0.0, 3100.0, -2950.0, //
+            -35.0, 2.0, -9.4e4, 1.2e3, //
+            -33.0, -1.5, 1.1e3, -9.1e4,
+        );
+        let g = 1.7e-3;
+        let w = nalgebra::Matrix4::identity() - g * jac;
+        let r = [0.3, -1.2, 45.0, -7.5];
+        let x = Ros2Matrix::new(&jac, g).expect("invertible").solve(r);
+        let lu = w
+            .lu()
+            .solve(&nalgebra::Vector4::from(r))
+            .expect("invertible");
+        for i in 0..4 {
+            assert!(
+                (x[i] - lu[i]).abs() <= 1e-12 * lu[i].abs().max(1.0),
+                "{i}: {x:?} {lu}"
+            );
+        }
+        // W x = r closes to rounding.
+        let back = w * nalgebra::Vector4::from(x);
+        for i in 0..4 {
+            assert!((back[i] - r[i]).abs() < 1e-10, "{back} {r:?}");
+        }
+        // A singular complement is refused: D = C B (here g = 0 gives W = I, never singular;
+        // J chosen so that S = 0).
+        let sing = nalgebra::Matrix4::new(
+            0.0, 0.0, 0.0, 0.0, //
+            0.0, 0.0, 0.0, 0.0, //
+            0.0, 0.0, 1.0, 0.0, //
+            0.0, 0.0, 0.0, 1.0,
+        );
+        assert!(Ros2Matrix::new(&sing, 1.0).is_none());
+    }
 
     /// A straight drive: θ3 = θ5 = 0, θ4 = θ6 = 1.
     const THETA: [f64; 6] = [0.26, 0.25, 0.0, 1.0, 0.0, 1.0];
