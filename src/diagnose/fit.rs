@@ -226,13 +226,21 @@ fn shortened_lags(
         simulate_all(model, th, &data.recs, &cur.initial)
             .map_or(f64::INFINITY, |y| frame.residuals(&y).norm_squared())
     };
+    // The grid on the pool's threads; the first least cost in grid order kept (as a
+    // sequential scan would).
+    use rayon::prelude::*;
+    let grid: Vec<(f64, f64)> = [0.3, 0.1, 0.03]
+        .into_iter()
+        .flat_map(|lag| [0.5, 1.0, 2.0].map(|level| (level, lag)))
+        .collect();
+    let costs: Vec<f64> = grid
+        .par_iter()
+        .map(|&(level, lag)| training_cost(&scaled(theta, base, active, level, lag)))
+        .collect();
     let mut best = (f64::INFINITY, 1.0, 1.0);
-    for lag in [0.3, 0.1, 0.03] {
-        for level in [0.5, 1.0, 2.0] {
-            let cost = training_cost(&scaled(theta, base, active, level, lag));
-            if cost < best.0 {
-                best = (cost, level, lag);
-            }
+    for (&cost, &(level, lag)) in costs.iter().zip(&grid) {
+        if cost < best.0 {
+            best = (cost, level, lag);
         }
     }
     let from = scaled(theta, base, active, best.1, best.2);
