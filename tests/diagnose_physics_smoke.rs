@@ -154,3 +154,40 @@ fn a_pioneer_payload_set_down_in_a_validation_block_is_named() {
     let theta1 = r.truth_params["payload"]["theta1_loaded_map"];
     assert!((p["theta1_after"] - theta1).abs() <= 0.2 * theta1);
 }
+
+/// A rate limit that keeps the accelerations below the floor's grip leaves the slippery floor
+/// nothing to act on: the pair's recording is the rate limit's alone (marginal visibility
+/// 0 %), and the harness reports the floor as masked; next to a dead time the floor acts and
+/// nothing is masked.
+#[test]
+fn a_floor_behind_a_rate_limit_is_reported_masked() {
+    let spec = |effects: Vec<&'static str>| RunSpec {
+        profile: "khepera3".into(),
+        timing: Timing::WindowEnd,
+        effects,
+        seed: 3,
+        duration_s: 30.0,
+        jitter: 0.0,
+        candidates: None,
+        cache: None,
+    };
+    let specs = [
+        spec(vec!["rate_limit", "floor_mu"]),
+        spec(vec!["latency", "floor_mu"]),
+    ];
+    let recs = run_all(&specs, 2, &|_, _| {});
+    for r in &recs {
+        eprintln!(
+            "{}: masked {:?}, marginal {:?}, named {:?}",
+            r.case, r.masked, r.marginal_visibility, r.named
+        );
+        assert!(r.error.is_none(), "{}: {:?}", r.case, r.error);
+    }
+    let (behind, beside) = (&recs[0], &recs[1]);
+    assert_eq!(behind.masked, ["floor_mu"]);
+    let floor = behind.marginal_visibility["floor_mu"];
+    assert!(floor.v < 1e-9 && floor.w < 1e-9, "{floor:?}");
+    assert!(behind.marginal_visibility["rate_limit"].v > 10.0);
+    assert!(beside.masked.is_empty());
+    assert!(beside.marginal_visibility["floor_mu"].w > harness::MASKED_PERCENT);
+}
