@@ -57,6 +57,10 @@ pub struct Terms {
     pub wheels: Option<WheelTerms>,
     /// Each wheel's grip on the floor limited ([`Traction`]).
     pub traction: Option<Traction>,
+    /// The right wheel's row of the dynamics scaled: with the wheels' accelerations
+    /// ṁ_R,L = v̇ ± (d/2) ω̇ (d the wheel track), ṁ_R × this factor [-] (a larger right tyre,
+    /// whose share of the chassis inertia grows as the encoders see it; `None`: 1).
+    pub right_row: Option<f64>,
 }
 
 /// A traction limit (`traction_limit`): the wheels and the body as two inertias, θ1, θ2 split

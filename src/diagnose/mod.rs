@@ -26,7 +26,7 @@
 //!    strongest first — every effect of `wheelid_models::effects::EFFECTS` (`input_delay`,
 //!    `acceleration_limit`, `velocity_saturation`, `coulomb_friction`, `wheel_asymmetry`,
 //!    `payload_change`, `gain_drift`, `slip`, `wheel_friction`, `effort_clamp`,
-//!    `amp_asymmetry`, `traction_limit`). A two-channel candidate acts on the channels whose own pattern is
+//!    `amp_asymmetry`, `traction_limit`, `tyre_asymmetry`). A two-channel candidate acts on the channels whose own pattern is
 //!    significant; the other channel's parameter is held at its null;
 //! 5. **model and accept** — the extended model is fitted by output error; the candidate is
 //!    kept only if the validation cost Σ_c Σ_k e²/σ_c² drops by at least

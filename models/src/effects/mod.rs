@@ -12,6 +12,7 @@ mod input_delay;
 mod payload_change;
 mod slip;
 mod traction_limit;
+mod tyre_asymmetry;
 mod velocity_saturation;
 mod wheel_asymmetry;
 mod wheel_friction;
@@ -28,12 +29,13 @@ pub use input_delay::InputDelay;
 pub use payload_change::PayloadChange;
 pub use slip::Slip;
 pub use traction_limit::TractionLimit;
+pub use tyre_asymmetry::TyreAsymmetry;
 pub use velocity_saturation::VelocitySaturation;
 pub use wheel_asymmetry::WheelAsymmetry;
 pub use wheel_friction::WheelFriction;
 
 /// The registry: every built-in effect, in the order the diagnosis reports them.
-pub static EFFECTS: [&dyn Effect; 12] = [
+pub static EFFECTS: [&dyn Effect; 13] = [
     &InputDelay,
     &AccelerationLimit,
     &VelocitySaturation,
@@ -46,6 +48,7 @@ pub static EFFECTS: [&dyn Effect; 12] = [
     &EffortClamp,
     &AmpAsymmetry,
     &TractionLimit,
+    &TyreAsymmetry,
 ];
 
 /// A value far beyond any command: a limit at this level never binds (a limit's null).
@@ -109,6 +112,8 @@ impl Candidate {
     pub const AMP_ASYMMETRY: Candidate = Candidate(&AmpAsymmetry);
     /// Each wheel's grip on the floor limited ([`TractionLimit`]).
     pub const TRACTION_LIMIT: Candidate = Candidate(&TractionLimit);
+    /// Right/left tyre radius mismatch ([`TyreAsymmetry`]).
+    pub const TYRE_ASYMMETRY: Candidate = Candidate(&TyreAsymmetry);
 
     /// A candidate for any effect (a built-in one of [`EFFECTS`] or the caller's own).
     pub fn new(effect: &'static dyn Effect) -> Self {

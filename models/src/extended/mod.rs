@@ -217,6 +217,8 @@ struct Field {
     slip: [f64; 2],
     /// Per-wheel efforts: (right gain, effort_max [m/s], κ \[m\]).
     wheels: Option<(f64, f64, f64)>,
+    /// The right wheel's row scale ([`wheelid_core::Terms::right_row`]).
+    right_row: Option<f64>,
 }
 
 impl Field {
@@ -232,6 +234,25 @@ impl Field {
             wheels: ph
                 .wheels
                 .map(|w| (w.right_gain, w.effort_max, w.mix * 0.5 * track)),
+            right_row: ph.right_row,
+        }
+    }
+
+    /// `f` (and the rows of `a`) with the right wheel's row scaled by `s`: in the wheels'
+    /// accelerations ṁ_R,L = f_v ± h f_ω (h = d/2), ṁ_R × s, back to (v̇, ω̇).
+    #[inline(always)]
+    fn scale_right_row(&self, s: f64, f: &mut [f64; 2], a: &mut [[f64; 2]; 2]) {
+        let h = 0.5 * self.track;
+        let k = s - 1.0;
+        // (v̇, ω̇) += k ṁ_R (1/2, 1/d) = k ṁ_R (1/2, 1/(2h)).
+        let right = f[0] + h * f[1];
+        f[0] += 0.5 * k * right;
+        f[1] += 0.5 * k * right / h;
+        let [row_v, row_w] = a;
+        let r = [0, 1].map(|col| row_v[col] + h * row_w[col]);
+        for (col, r) in r.into_iter().enumerate() {
+            a[0][col] += 0.5 * k * r;
+            a[1][col] += 0.5 * k * r / h;
         }
     }
 
@@ -294,11 +315,11 @@ impl Field {
             a[1][1] =
                 (-th[4] * v - th[5] * (1.0 + kw * v.abs()) - lost - dry_w + jf[1][1]) * inv[1];
         }
-        Local {
-            f: [fv * inv[0], fw * inv[1]],
-            a,
-            ju,
+        let mut f = [fv * inv[0], fw * inv[1]];
+        if let Some(scale) = self.right_row {
+            self.scale_right_row(scale, &mut f, &mut a);
         }
+        Local { f, a, ju }
     }
 
     /// ż for the state z = (v, ω, ∂v/∂p, ∂ω/∂p) under command `c`: θ with the reciprocals
@@ -472,7 +493,9 @@ impl Extended {
                 self.params.len()
             )));
         }
-        if ph.traction.is_some() {
+        // Stages without sensitivity equations: the traction's, the right wheel's row scale
+        // (its θ sources are not transformed).
+        if ph.traction.is_some() || ph.right_row.is_some() {
             return self.differenced(theta, rec, initial, columns);
         }
         let scale = th0.iter().fold(0.0f64, |a, x| a.max(x.abs()));

@@ -3,6 +3,7 @@
 
 use super::*;
 use crate::delay::InputDelay;
+use wheelid_core::WheelTerms;
 
 const THETA: [f64; 6] = [0.26, 0.25, -0.05, 0.9965, 0.08, 1.0768];
 
@@ -296,5 +297,63 @@ fn analytic_sensitivities_match_central_differences_with_every_candidate() {
                 }
             }
         }
+    }
+}
+
+/// A larger right tyre (`tyre_asymmetry`, ρ) is the amplifier asymmetry a = 1/ρ with the right
+/// wheel's row scaled by 1/ρ: at any state the wheels' accelerations ṁ_R,L = v̇ ± (d/2) ω̇ are
+/// the amplifier's with ṁ_R × 1/ρ (and the Jacobian's rows likewise), and the steady state is
+/// the amplifier's (a row scale moves no equilibrium).
+#[test]
+fn a_larger_tyre_is_the_amplifier_asymmetry_with_its_wheels_row_scaled() {
+    let (rho, track) = (1.05, 0.3);
+    let h = 0.5 * track;
+    let tyre = Terms {
+        wheels: Some(WheelTerms {
+            right_gain: 1.0 / rho,
+            ..WheelTerms::default()
+        }),
+        right_row: Some(1.0 / rho),
+        ..Terms::default()
+    };
+    let amp = Terms {
+        right_row: None,
+        ..tyre
+    };
+    let inv = [1.0 / THETA[0], 1.0 / THETA[1]];
+    let c = Cmd::<0>::at([0.4, -0.7], [[]; 2], false);
+    let (ft, fa) = (
+        Field::new(&Vec::new(), track, &tyre),
+        Field::new(&Vec::new(), track, &amp),
+    );
+    for (v, w) in [(0.0, 0.0), (0.3, 0.5), (-0.2, 1.1)] {
+        let lt = ft.local(&THETA, &inv, (v, w), &c, true);
+        let la = fa.local(&THETA, &inv, (v, w), &c, true);
+        let wheels = |f: [f64; 2]| [f[0] + h * f[1], f[0] - h * f[1]];
+        let (mt, ma) = (wheels(lt.f), wheels(la.f));
+        approx::assert_abs_diff_eq!(mt[0], ma[0] / rho, epsilon = 1e-12);
+        approx::assert_abs_diff_eq!(mt[1], ma[1], epsilon = 1e-12);
+        for col in 0..2 {
+            let (jt, ja) = (
+                wheels([lt.a[0][col], lt.a[1][col]]),
+                wheels([la.a[0][col], la.a[1][col]]),
+            );
+            approx::assert_abs_diff_eq!(jt[0], ja[0] / rho, epsilon = 1e-12);
+            approx::assert_abs_diff_eq!(jt[1], ja[1], epsilon = 1e-12);
+        }
+    }
+    // Steady state: the amplifier's at a = 1/ρ; the candidate's own parameter sets both.
+    let rec = recording(false, 400, |_| (0.5, 0.2));
+    let et = Extended::new(&[Candidate::TYRE_ASYMMETRY], track).expect("model");
+    let ea = Extended::new(&[Candidate::AMP_ASYMMETRY], track).expect("model");
+    let mut th = THETA.to_vec();
+    th.push(rho);
+    let yt = et.simulate(&th, &rec, &[0.0, 0.0]).expect("sim");
+    th[6] = 1.0 / rho;
+    let ya = ea.simulate(&th, &rec, &[0.0, 0.0]).expect("sim");
+    for ch in 0..2 {
+        approx::assert_abs_diff_eq!(yt[ch][399], ya[ch][399], epsilon = 1e-9);
+        // …but not the transient.
+        assert!((yt[ch][1] - ya[ch][1]).abs() > 1e-4, "{ch}");
     }
 }
