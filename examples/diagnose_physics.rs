@@ -590,7 +590,15 @@ pub fn magnitudes(
                 est("right_gain"),
                 true,
             ),
-            "tyre_radius_right" => push("factor vs ratio (−1)", g("factor"), est("ratio"), true),
+            "tyre_radius_right" => {
+                push(
+                    "factor vs right_radius (−1)",
+                    g("factor"),
+                    est("right_radius"),
+                    true,
+                );
+                push("factor vs ratio (−1)", g("factor"), est("ratio"), true);
+            }
             "dry_friction" => {
                 push(
                     "θ4·Δv vs v_coulomb",
