@@ -19,7 +19,10 @@
 # the acceptance change of be1ac27 (near-perfect fits kept), with clean 2201-2250; 1011-1012
 # once with the traction_limit candidate (41bdbd1); clean 2251-2270 once at 82ea0fb; 1013-1014
 # and clean 2271-2370 once at 33ac34e (the change-time interval); 1015-1016 once at 85d0171
-# (the input_delay floor); the next report takes 1017.. and 2371.. .
+# (the input_delay floor); 1017-1018 (single, clean) and 1017 (pairs, window_end) once at
+# b393986 (the tyre_asymmetry candidate) — the pairs then led to f2a8227's distinct-nominee
+# rule, so 1017 is tuning now; 1019-1020 (single, clean), 1019 (pairs) and clean 2371-2420
+# once at f2a8227; the next report takes 1021.. and 2421.. .
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
