@@ -602,6 +602,53 @@ pub(super) fn run(
 mod tests {
     use super::*;
 
+    fn nominee(c: Candidate, cols: &[&[f64]]) -> Nominee {
+        let n = cols[0].len();
+        Nominee {
+            pattern: Pattern {
+                candidate: c,
+                s: DMatrix::from_fn(n, cols.len(), |i, j| cols[j][i]),
+                param_of_col: (0..cols.len()).collect(),
+                guess: vec![1.0; cols.len()],
+                inactive: Vec::new(),
+                evidence: String::new(),
+                grid: 1,
+            },
+            score: score::Score {
+                stat: 10.0,
+                dof: cols.len(),
+                p_value: 0.01,
+                beta: vec![0.0; cols.len()],
+            },
+            p_value: 0.01,
+        }
+    }
+
+    /// Distinct nominees: one-column patterns within cosine 0.99 of an earlier nominated one's,
+    /// net of the Jacobian's basis, share its slot; the projection decides (two patterns that
+    /// differ only along the basis are one), sign does not, and multi-column patterns always
+    /// count.
+    #[test]
+    fn near_duplicate_fingerprints_share_a_slot() {
+        // Basis: the first coordinate (what θ absorbs).
+        let q = DMatrix::from_column_slice(4, 1, &[1.0, 0.0, 0.0, 0.0]);
+        let amp = nominee(Candidate::AMP_ASYMMETRY, &[&[5.0, 1.0, 2.0, 0.0]]);
+        // Differs from amp only along the basis and by a sign: a duplicate.
+        let tyre = nominee(Candidate::TYRE_ASYMMETRY, &[&[-9.0, -1.0, -2.0, 0.0]]);
+        // cos ≈ 0.98 with amp after the projection: distinct.
+        let wheel = nominee(Candidate::WHEEL_ASYMMETRY, &[&[0.0, 1.0, 2.0, 0.4]]);
+        let clamp = nominee(
+            Candidate::EFFORT_CLAMP,
+            &[&[0.0, 0.0, 0.0, 1.0], &[0.0, 1.0, 2.0, 0.0]],
+        );
+        let all = [amp, tyre, wheel, clamp];
+        assert_eq!(distinct(&all, &[true, true, false, false], &q), 1);
+        assert_eq!(distinct(&all, &[true, false, true, false], &q), 2);
+        assert_eq!(distinct(&all, &[true, true, true, false], &q), 2);
+        assert_eq!(distinct(&all, &[true, true, true, true], &q), 3);
+        assert_eq!(distinct(&all, &[false; 4], &q), 0);
+    }
+
     /// The fit budget's rules on closed-form costs: a model fitted by differences needs a
     /// start 5 % better than the current model's and is never a rival; any rival needs a start
     /// within 3× the first accepted one's.
