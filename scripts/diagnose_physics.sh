@@ -21,8 +21,9 @@
 # and clean 2271-2370 once at 33ac34e (the change-time interval); 1015-1016 once at 85d0171
 # (the input_delay floor); 1017-1018 (single, clean) and 1017 (pairs, window_end) once at
 # b393986 (the tyre_asymmetry candidate) — the pairs then led to f2a8227's distinct-nominee
-# rule, so 1017 is tuning now; 1019-1020 (single, clean), 1019 (pairs) and clean 2371-2420
-# once at f2a8227; the next report takes 1021.. and 2421.. .
+# rule, so 1017 is tuning now; 1019-1020 (single, clean), 1019 (pairs) and clean 2371-2470
+# once at f2a8227 (1019's gain_decay+payload and 1020's Khepera clamps were then looked at);
+# the next report takes 1021.. and 2471.. .
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
