@@ -62,10 +62,12 @@ pub(super) fn patterns(c: Candidate, data: &Data, cur: &Current) -> Option<Vec<P
         }
         // The level read off a nominal fit that has absorbed part of the limit sits above the
         // true one: probed at a few fractions of it, the best taken (Bonferroni).
+        // The fractions' simulations on the pool's threads (a traction probe's is the longest
+        // of a round), collected in order.
         Probe::Levels { levels, evidence } => {
+            use rayon::prelude::*;
             let params: Vec<usize> = levels.iter().map(|&(j, _)| j).collect();
-            let mut out = Vec::new();
-            for f in PROBE_FRACTIONS {
+            let at = |f: f64| -> Option<Pattern> {
                 let mut v = null.clone();
                 for &(j, level) in &levels {
                     v[j] = f * level;
@@ -81,9 +83,12 @@ pub(super) fn patterns(c: Candidate, data: &Data, cur: &Current) -> Option<Vec<P
                 let mut p = single(cols, params.clone(), evidence.clone());
                 p.guess = v;
                 p.grid = PROBE_FRACTIONS.len();
-                out.push(p);
-            }
-            Some(out)
+                Some(p)
+            };
+            PROBE_FRACTIONS
+                .par_iter()
+                .map(|&f| at(f))
+                .collect::<Option<Vec<_>>>()
         }
         // A grid of change times over the middle of the run.
         Probe::TimeGrid { time, n, columns } => {
