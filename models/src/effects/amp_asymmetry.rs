@@ -14,8 +14,10 @@
 //! θ2 ω̇ = (a e_R − e_L)/d       − (θ6 − 1) ω − θ5 v ω …
 //! ```
 
-use wheelid_core::effect::{FitData, Probe, ProbeData, Terms, significant};
+use wheelid_core::effect::{FitData, Probe, ProbeData, Terms};
 use wheelid_core::{Effect, EffectChannels, Error, ParamInfo, Result, WheelTerms};
+
+use super::ratio_plausible;
 
 static PARAMS: [ParamInfo; 1] = [ParamInfo {
     name: "right_gain",
@@ -58,13 +60,7 @@ impl Effect for AmpAsymmetry {
         se: f64,
         _fit: &FitData<'_>,
     ) -> std::result::Result<(), String> {
-        significant(&PARAMS[j], x, se, 1.0)?;
-        if !(0.5..=2.0).contains(&x) {
-            return Err(format!(
-                "a right/left effort gain of {x:.3} is not plausible"
-            ));
-        }
-        Ok(())
+        ratio_plausible(&PARAMS[j], x, se, 0.5..=2.0, "a right/left effort gain")
     }
     fn apply(&self, p: &[f64], terms: &mut Terms) -> Result<()> {
         if p[0] <= 0.0 {

@@ -82,6 +82,26 @@ pub fn limit_plausible(
     Ok(())
 }
 
+/// A ratio of the right wheel to the left (null 1) is significant (at least 3 standard errors
+/// from 1) and inside the `plausible` range; `what` names it in the report, e.g. "a
+/// right/left tyre radius ratio".
+///
+/// # Errors
+/// The reason for the report.
+pub fn ratio_plausible(
+    info: &ParamInfo,
+    x: f64,
+    se: f64,
+    plausible: std::ops::RangeInclusive<f64>,
+    what: &str,
+) -> std::result::Result<(), String> {
+    wheelid_core::effect::significant(info, x, se, 1.0)?;
+    if !plausible.contains(&x) {
+        return Err(format!("{what} of {x:.3} is not plausible"));
+    }
+    Ok(())
+}
+
 /// One effect the diagnosis can search: a handle on an [`Effect`], compared, hashed and
 /// (de)serialised by name.
 #[derive(Clone, Copy)]

@@ -22,8 +22,10 @@
 //!
 //! The stage has no sensitivity equations: its fits take their Jacobian by differences.
 
-use wheelid_core::effect::{FitData, Probe, ProbeData, Terms, significant};
+use wheelid_core::effect::{FitData, Probe, ProbeData, Terms};
 use wheelid_core::{Effect, EffectChannels, Error, ParamInfo, Result, WheelTerms};
+
+use super::ratio_plausible;
 
 static PARAMS: [ParamInfo; 1] = [ParamInfo {
     name: "right_radius",
@@ -66,13 +68,13 @@ impl Effect for TyreAsymmetry {
         se: f64,
         _fit: &FitData<'_>,
     ) -> std::result::Result<(), String> {
-        significant(&PARAMS[j], x, se, 1.0)?;
-        if !(0.8..=1.25).contains(&x) {
-            return Err(format!(
-                "a right/left tyre radius ratio of {x:.3} is not plausible"
-            ));
-        }
-        Ok(())
+        ratio_plausible(
+            &PARAMS[j],
+            x,
+            se,
+            0.8..=1.25,
+            "a right/left tyre radius ratio",
+        )
     }
     fn apply(&self, p: &[f64], terms: &mut Terms) -> Result<()> {
         if !(p[0] > 0.0 && p[0].is_finite()) {

@@ -2,8 +2,10 @@
 //! scaled by 2ρ/(1 + ρ) and 2/(1 + ρ) (d: the wheel track). Its fingerprint: ω's residual
 //! follows v_ref.
 
-use wheelid_core::effect::{FitData, Probe, ProbeData, Terms, significant};
+use wheelid_core::effect::{FitData, Probe, ProbeData, Terms};
 use wheelid_core::{Effect, EffectChannels, Error, ParamInfo, Result};
+
+use super::ratio_plausible;
 
 static PARAMS: [ParamInfo; 1] = [ParamInfo {
     name: "ratio",
@@ -46,11 +48,7 @@ impl Effect for WheelAsymmetry {
         se: f64,
         _fit: &FitData<'_>,
     ) -> std::result::Result<(), String> {
-        significant(&PARAMS[j], x, se, 1.0)?;
-        if !(0.5..=2.0).contains(&x) {
-            return Err(format!("a wheel gain ratio of {x:.3} is not plausible"));
-        }
-        Ok(())
+        ratio_plausible(&PARAMS[j], x, se, 0.5..=2.0, "a wheel gain ratio")
     }
     fn apply(&self, p: &[f64], terms: &mut Terms) -> Result<()> {
         if p[0] <= -1.0 + 1e-9 {
