@@ -81,22 +81,24 @@ fn test_round(
         // among explanations. Fingerprints significant on their own (p < α) join the
         // nominees, up to FLOOR_NOMINEES in all (a payload step whose fingerprint is weaker
         // than a gain drift's may still explain the data far better).
-        let mut count = distinct(&nominees, &nominated, &q);
+        let net = net_patterns(&nominees, &q);
+        let mut count = distinct(&net, &nominated);
         for &i in &by_p {
             if count >= FLOOR_NOMINEES {
                 break;
             }
             if !nominated[i] && nominees[i].p_value < alpha {
                 nominated[i] = true;
-                count = distinct(&nominees, &nominated, &q);
+                count = distinct(&net, &nominated);
             }
         }
     } else if above_floor(data, cur).iter().any(|&a| a) {
         // A residual well above the noise floor is a mismatch whatever the family says: then
         // the FLOOR_NOMINEES distinct fingerprints with the smallest p-values are fitted
         // (validation evidence and the information criterion still decide).
+        let net = net_patterns(&nominees, &q);
         for &i in &by_p {
-            if distinct(&nominees, &nominated, &q) >= FLOOR_NOMINEES {
+            if distinct(&net, &nominated) >= FLOOR_NOMINEES {
                 break;
             }
             nominated[i] = nominees[i].p_value < 0.5;
@@ -133,31 +135,40 @@ const FLOOR_NOMINEES: usize = 3;
 /// the other nominees' patterns there lie at |cos| ≤ 0.66).
 const DUPLICATE_COSINE: f64 = 0.99;
 
-/// The number of distinct patterns among the `nominated` fingerprints: a one-column pattern
-/// within [`DUPLICATE_COSINE`] of an earlier nominated one's (both net of the basis `q` of
-/// the fit's Jacobian, as the score test sees them) counts with it.
-fn distinct(nominees: &[Nominee], nominated: &[bool], q: &DMatrix<f64>) -> usize {
-    let net = |s: &DMatrix<f64>| -> Option<nalgebra::DVector<f64>> {
-        (s.ncols() == 1).then(|| {
-            let c = s.column(0).into_owned();
-            let p = &c - q * (q.transpose() * &c);
-            let n = p.norm();
-            if n > 0.0 { p / n } else { p }
+/// Each nominee's pattern net of the basis `q` of the fit's Jacobian (as the score test sees
+/// it), normalised, for a one-column pattern; `None` for a multi-column one.
+fn net_patterns(nominees: &[Nominee], q: &DMatrix<f64>) -> Vec<Option<nalgebra::DVector<f64>>> {
+    nominees
+        .iter()
+        .map(|n| {
+            let s = &n.pattern.s;
+            (s.ncols() == 1).then(|| {
+                let c = s.column(0).into_owned();
+                let p = &c - q * (q.transpose() * &c);
+                let norm = p.norm();
+                if norm > 0.0 { p / norm } else { p }
+            })
         })
-    };
-    let mut kept: Vec<Option<nalgebra::DVector<f64>>> = Vec::new();
-    for (n, _) in nominees.iter().zip(nominated).filter(|(_, d)| **d) {
-        let x = net(&n.pattern.s);
-        let duplicate = x.as_ref().is_some_and(|x| {
-            kept.iter()
-                .flatten()
-                .any(|y| x.dot(y).abs() > DUPLICATE_COSINE)
-        });
-        if !duplicate {
-            kept.push(x);
+        .collect()
+}
+
+/// The number of distinct patterns among the `nominated` ones of `net` ([`net_patterns`]):
+/// a one-column pattern within [`DUPLICATE_COSINE`] of an earlier nominated one's counts
+/// with it; a multi-column pattern always counts.
+fn distinct(net: &[Option<nalgebra::DVector<f64>>], nominated: &[bool]) -> usize {
+    let mut kept: Vec<&nalgebra::DVector<f64>> = Vec::new();
+    let mut count = 0;
+    for (x, _) in net.iter().zip(nominated).filter(|(_, d)| **d) {
+        match x {
+            Some(x) if kept.iter().any(|y| x.dot(y).abs() > DUPLICATE_COSINE) => {}
+            Some(x) => {
+                kept.push(x);
+                count += 1;
+            }
+            None => count += 1,
         }
     }
-    kept.len()
+    count
 }
 
 /// The first round's family as the report lists it.
@@ -643,12 +654,12 @@ mod tests {
             Candidate::EFFORT_CLAMP,
             &[&[0.0, 0.0, 0.0, 1.0], &[0.0, 1.0, 2.0, 0.0]],
         );
-        let all = [amp, tyre, wheel, clamp];
-        assert_eq!(distinct(&all, &[true, true, false, false], &q), 1);
-        assert_eq!(distinct(&all, &[true, false, true, false], &q), 2);
-        assert_eq!(distinct(&all, &[true, true, true, false], &q), 2);
-        assert_eq!(distinct(&all, &[true, true, true, true], &q), 3);
-        assert_eq!(distinct(&all, &[false; 4], &q), 0);
+        let net = net_patterns(&[amp, tyre, wheel, clamp], &q);
+        assert_eq!(distinct(&net, &[true, true, false, false]), 1);
+        assert_eq!(distinct(&net, &[true, false, true, false]), 2);
+        assert_eq!(distinct(&net, &[true, true, true, false]), 2);
+        assert_eq!(distinct(&net, &[true, true, true, true]), 3);
+        assert_eq!(distinct(&net, &[false; 4]), 0);
     }
 
     /// The fit budget's rules on closed-form costs: a model fitted by differences needs a
