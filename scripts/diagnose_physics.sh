@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Issue 15's measuring instrument: `wheelid diagnose` on the independent rigid-body backend
 # (wheelid_robots::physics), built in release and run with the arguments passed through to
-# examples/diagnose_physics.rs (its module docs and --help list them). Prints a markdown report
+# examples/diagnose_physics/ (main.rs: its module docs and --help list them). Prints a markdown report
 # (confusion matrix true effect × named effect, share exactly right overall / per profile / per
 # convention, false alarms on clean runs with a 95 % Clopper-Pearson interval, magnitude
 # errors, times); --json FILE writes one record per run.
