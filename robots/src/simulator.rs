@@ -96,11 +96,8 @@ pub struct SimRobot {
     t: f64,
     /// True state (x, y, ψ, v, ω), (x, y) the point h.
     s: [f64; 5],
-    /// Wheel angles (right, left) \[rad\] and the ticks counted at the last sample.
-    ang: [f64; 2],
-    ticks: [f64; 2],
-    /// Odometry pose of the axle centre (x, y, φ), `a` behind the point h.
-    odom: [f64; 3],
+    /// Wheel angles, ticks and odometry.
+    enc: Encoders,
     /// Commands waiting for their delay: (time they take effect, v_ref, ω_ref).
     queue: VecDeque<(f64, f64, f64)>,
     /// The command in force after the delay.
@@ -150,9 +147,7 @@ impl SimRobot {
             k: 0,
             t: 0.0,
             s: [0.0; 5],
-            ang: [0.0; 2],
-            ticks: [0.0; 2],
-            odom: [0.0; 3],
+            enc: Encoders::default(),
             queue: VecDeque::new(),
             command: [0.0; 2],
             setpoint: [0.0; 2],
@@ -166,7 +161,7 @@ impl SimRobot {
             },
             sent: (0.0, 0.0),
         };
-        robot.odom = robot.axle_pose(&robot.s);
+        robot.enc.odom = robot.axle_pose(&robot.s);
         robot.t = robot.jitter(0);
         robot.last.t = robot.t;
         Ok(robot)
@@ -182,7 +177,7 @@ impl SimRobot {
         let th = self.theta_at(self.t);
         self.command = [th[3] * v - th[2] * w * w, th[5] * w + th[4] * v * w];
         self.setpoint = self.command;
-        self.odom = self.axle_pose(&state);
+        self.enc.odom = self.axle_pose(&state);
         self.last = Sample {
             t: self.t,
             v,
@@ -342,8 +337,8 @@ impl SimRobot {
             });
             if self.encoders {
                 let (v0, w0, v1, w1) = (s[3], s[4], s1[3], s1[4]);
-                self.ang[0] += h * 0.5 * ((v0 + d * w0 / 2.0) + (v1 + d * w1 / 2.0)) / r;
-                self.ang[1] += h * 0.5 * ((v0 - d * w0 / 2.0) + (v1 - d * w1 / 2.0)) / r;
+                self.enc.ang[0] += h * 0.5 * ((v0 + d * w0 / 2.0) + (v1 + d * w1 / 2.0)) / r;
+                self.enc.ang[1] += h * 0.5 * ((v0 - d * w0 / 2.0) + (v1 - d * w1 / 2.0)) / r;
             }
             self.s = s1;
         }
@@ -365,34 +360,10 @@ impl SimRobot {
             phi: psi,
         };
         if self.encoders {
-            let p = &self.profile;
-            let (r, d) = (p.wheel_radius, p.track);
-            let rad_per_tick = 2.0 * std::f64::consts::PI / p.ticks_per_rev;
-            let ticks = self.ang.map(|a| (a / rad_per_tick).floor());
-            let dphi = [0, 1].map(|i| (ticks[i] - self.ticks[i]) * rad_per_tick);
-            self.ticks = ticks;
-            let quant = |x: f64| {
-                if p.speed_resolution > 0.0 {
-                    (x / p.speed_resolution).round() * p.speed_resolution
-                } else {
-                    x
-                }
-            };
-            let sr = quant(dphi[0] * r / dt + self.wheel_noise.sample(&mut self.rng));
-            let sl = quant(dphi[1] * r / dt + self.wheel_noise.sample(&mut self.rng));
-            out.v = (sr + sl) / 2.0;
-            out.w = (sr - sl) / d;
-            // Odometry, eq. 3.2–3.3.
-            let ds = r * (dphi[0] + dphi[1]) / 2.0;
-            let dth = r * (dphi[0] - dphi[1]) / d;
-            let mid = self.odom[2] + dth / 2.0;
-            self.odom[0] += ds * mid.cos();
-            self.odom[1] += ds * mid.sin();
-            self.odom[2] += dth;
-            let [ox, oy, oth] = self.odom;
-            out.x = ox + p.a * oth.cos();
-            out.y = oy + p.a * oth.sin();
-            out.phi = oth;
+            let m = self
+                .enc
+                .read(&self.profile, dt, &mut self.rng, &self.wheel_noise);
+            [out.v, out.w, out.x, out.y, out.phi] = m;
         }
         if let Some(n) = self.effects.measurement_noise {
             let z: [f64; 2] = [0, 1].map(|_| rand_distr::StandardNormal.sample(&mut self.rng));
@@ -400,6 +371,63 @@ impl SimRobot {
             out.w += n.w_std * z[1];
         }
         out
+    }
+}
+
+/// The encoders and the odometry of the module docs' measurement model: each wheel's angle
+/// (right, left) \[rad\] as the caller integrates it, the whole ticks counted at the last
+/// sample, and the odometry pose (x, y, φ) of the axle centre (eq. 3.2–3.3).
+#[derive(Debug, Clone, Default)]
+pub(crate) struct Encoders {
+    /// Wheel angles (right, left) \[rad\].
+    pub(crate) ang: [f64; 2],
+    /// Ticks counted at the last sample.
+    ticks: [f64; 2],
+    /// Odometry pose of the axle centre (x [m], y [m], φ [rad]).
+    pub(crate) odom: [f64; 3],
+}
+
+impl Encoders {
+    /// The reading `dt` [s] after the previous one on the robot `p`: wheel speeds from the
+    /// tick differences (window averages), with Gaussian `noise` [m/s] (right, then left,
+    /// drawn from `rng`) and rounded to `p.speed_resolution`; returns (v [m/s], ω [rad/s],
+    /// x [m], y [m], φ [rad]) with the pose of the point h, `p.a` ahead of the axle.
+    pub(crate) fn read(
+        &mut self,
+        p: &RobotProfile,
+        dt: f64,
+        rng: &mut ChaCha8Rng,
+        noise: &Normal<f64>,
+    ) -> [f64; 5] {
+        let (r, d) = (p.wheel_radius, p.track);
+        let rad_per_tick = 2.0 * std::f64::consts::PI / p.ticks_per_rev;
+        let ticks = self.ang.map(|a| (a / rad_per_tick).floor());
+        let dphi = [0, 1].map(|i| (ticks[i] - self.ticks[i]) * rad_per_tick);
+        self.ticks = ticks;
+        let quant = |x: f64| {
+            if p.speed_resolution > 0.0 {
+                (x / p.speed_resolution).round() * p.speed_resolution
+            } else {
+                x
+            }
+        };
+        let sr = quant(dphi[0] * r / dt + noise.sample(rng));
+        let sl = quant(dphi[1] * r / dt + noise.sample(rng));
+        // Odometry, eq. 3.2–3.3.
+        let ds = r * (dphi[0] + dphi[1]) / 2.0;
+        let dth = r * (dphi[0] - dphi[1]) / d;
+        let mid = self.odom[2] + dth / 2.0;
+        self.odom[0] += ds * mid.cos();
+        self.odom[1] += ds * mid.sin();
+        self.odom[2] += dth;
+        let [ox, oy, oth] = self.odom;
+        [
+            (sr + sl) / 2.0,
+            (sr - sl) / d,
+            ox + p.a * oth.cos(),
+            oy + p.a * oth.sin(),
+            oth,
+        ]
     }
 }
 

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use wheelid::config::{ExcitationConfig, SimulateConfig, read_toml, robot_profile};
 use wheelid::files::ModelFile;
-use wheelid::robots::{RobotProfile, simulate_recording};
+use wheelid::robots::{RobotProfile, simulate_model_recording, simulate_recording};
 
 use crate::{emit, physical_profile};
 
@@ -43,8 +43,10 @@ pub(crate) struct SimulateArgs {
     /// Report the exact v, ω and pose instead of the encoder model.
     #[arg(long)]
     exact: bool,
-    /// Simulator backend: a model file (from `identify --out` or `diagnose --out`) whose θ and
-    /// `[effects.*]` replace the robot's θ and the config's effects.
+    /// Simulator backend: a model file (from `identify --out` or `diagnose --out`) simulated
+    /// by its own equations — its θ and every `[effects.*]` a diagnosis found, actuator ones
+    /// included — in place of the robot's θ and the config's effects (the robot's period,
+    /// wheels and encoders stay).
     #[arg(long)]
     model: Option<PathBuf>,
     /// Output file: CSV, or a ROS 2 bag (`.mcap`: /cmd_vel Twist, /odom Odometry).
@@ -105,6 +107,32 @@ fn write_recording(rec: &wheelid_core::Recording, out: &std::path::Path) -> Resu
     Ok(())
 }
 
+/// A saved model (θ and the effects a diagnosis found), to be simulated by its own equations:
+/// the extended model and its parameters; θ goes into `robot`, and the model's physics
+/// replaces the configuration's effects (extra measurement noise stays).
+fn saved_model(
+    m: &std::path::Path,
+    robot: &mut RobotProfile,
+    sim: &mut wheelid::robots::SimSettings,
+) -> Result<(wheelid::models::Extended, Vec<f64>)> {
+    let file = ModelFile::read(m)?;
+    let theta: [f64; 6] = file.theta.as_slice().try_into().with_context(|| {
+        format!(
+            "{}: theta has {} values, not 6",
+            m.display(),
+            file.theta.len()
+        )
+    })?;
+    robot.theta = theta;
+    let saved = wheelid::models::Extended::from_found(&theta, &file.effects, robot.track)
+        .with_context(|| format!("{}: [effects]", m.display()))?;
+    sim.effects = wheelid::robots::Effects {
+        measurement_noise: sim.effects.measurement_noise,
+        ..Default::default()
+    };
+    Ok(saved)
+}
+
 pub(crate) fn run_simulate(a: SimulateArgs) -> Result<()> {
     let cfg: SimulateConfig = match &a.config {
         Some(p) => read_toml(p)?,
@@ -127,12 +155,10 @@ pub(crate) fn run_simulate(a: SimulateArgs) -> Result<()> {
         cfg.profile.as_ref(),
     )?;
     let mut sim = cfg.simulation.clone();
-    if let Some(m) = &a.model {
-        let file = ModelFile::read(m)?;
-        robot.theta.copy_from_slice(&file.theta);
-        sim.effects = wheelid::robots::Effects::from_found(&robot.theta, &file.effects)
-            .with_context(|| format!("{}: [effects]", m.display()))?;
-    }
+    let saved = match &a.model {
+        Some(m) => Some(saved_model(m, &mut robot, &mut sim)?),
+        None => None,
+    };
     if let Some(d) = a.duration {
         sim.duration_s = d;
     }
@@ -157,7 +183,13 @@ pub(crate) fn run_simulate(a: SimulateArgs) -> Result<()> {
             .clone()
             .unwrap_or_else(|| ExcitationConfig::for_robot(&robot)),
     };
-    let rec = simulate_recording(&robot, &excitation.build()?, &sim)?;
+    let excitation = excitation.build()?;
+    let rec = match &saved {
+        Some((model, params)) => {
+            simulate_model_recording(&robot, model, params, &excitation, &sim)?
+        }
+        None => simulate_recording(&robot, &excitation, &sim)?,
+    };
     // CSV, or a ROS 2 bag: /cmd_vel (geometry_msgs/Twist) and /odom (nav_msgs/Odometry).
     write_recording(&rec, &a.out)?;
     out!(
@@ -168,7 +200,10 @@ pub(crate) fn run_simulate(a: SimulateArgs) -> Result<()> {
         robot.period_s,
         a.out.display()
     );
-    let effects = sim.effects.active();
+    let effects: Vec<&str> = match &saved {
+        Some((model, _)) => model.candidates().iter().map(|c| c.name()).collect(),
+        None => sim.effects.active(),
+    };
     if !effects.is_empty() {
         out!("effects: {}", effects.join(", "));
     }

@@ -40,7 +40,10 @@ pub use crate::effects::Candidate;
 use crate::{dynamics, regressor};
 
 mod differences;
+mod found;
 mod traction;
+
+pub use found::Found;
 
 /// Shortest time constant θ1/θ4, θ2/θ6 the extended model accepts \[s\].
 pub const MIN_TIME_CONSTANT: f64 = 1e-3;
