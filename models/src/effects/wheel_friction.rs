@@ -76,7 +76,10 @@ impl Effect for WheelFriction {
     fn force(&self, p: &[f64], v: f64, w: f64, track: f64) -> Force {
         let c = p[0];
         let half = 0.5 * track;
-        let (tr, tl) = (((v + half * w) / EPS).tanh(), ((v - half * w) / EPS).tanh());
+        let (tr, tl) = (
+            crate::dynamics::tanh((v + half * w) / EPS),
+            crate::dynamics::tanh((v - half * w) / EPS),
+        );
         let (sr, sl) = ((1.0 - tr * tr) / EPS, (1.0 - tl * tl) / EPS);
         Force {
             f: [-0.5 * c * (tr + tl), -c * (tr - tl) / track],

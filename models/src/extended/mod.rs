@@ -279,7 +279,10 @@ impl Field {
         let mut fw = u[1] - th[4] * v * w - (th[5] + lost) * w - th[5] * kw * v.abs() * w;
         let (mut dry_v, mut dry_w) = (0.0, 0.0);
         if self.dry {
-            let (tv, tw) = ((v / FRICTION_EPS[0]).tanh(), (w / FRICTION_EPS[1]).tanh());
+            let (tv, tw) = (
+                dynamics::tanh(v / FRICTION_EPS[0]),
+                dynamics::tanh(w / FRICTION_EPS[1]),
+            );
             fv -= self.coulomb[0] * tv;
             fw -= self.coulomb[1] * tw;
             dry_v = self.coulomb[0] * (1.0 - tv * tv) / FRICTION_EPS[0];

@@ -168,7 +168,7 @@ impl Contact {
         let (vw, ww) = (vb + 0.5 * (sr + sl), wb + (sr - sl) / hd);
         let local = field((vw, ww), jac);
         let (dv, dw) = (local.f[0] * th[0], local.f[1] * th[1]);
-        let (gr, gl) = ((sr / self.s0).tanh(), (sl / self.s0).tanh());
+        let (gr, gl) = (dynamics::tanh(sr / self.s0), dynamics::tanh(sl / self.s0));
         let (tr, tl) = (self.c * gr, self.c * gl);
         let (tv, tw) = (0.5 * (tr + tl), (tr - tl) / (2.0 * self.kappa));
         let e = self.eps;
