@@ -64,6 +64,14 @@ pub struct DesignSettings {
     pub slope_max: [f64; 2],
     /// The floor space, a rectangle of these sides along x and y \[m\], centred on the start.
     pub space_m: [f64; 2],
+    /// Where the drive starts in that space: x, y \[m\] from its centre and the heading ψ
+    /// \[rad\] from its x axis (default the centre, facing +x; a re-design on the way starts
+    /// where the robot is).
+    #[serde(default)]
+    pub start_pose: [f64; 3],
+    /// The robot's (v \[m/s\], ω \[rad/s\]) as the drive starts (default at rest).
+    #[serde(default)]
+    pub start_velocity: [f64; 2],
     /// Target relative standard error of the target parameters (0.01: 1 %).
     pub accuracy: f64,
     /// The parameters the accuracy is asked of (0-based; default θ1, θ2, θ4, θ6).
@@ -96,7 +104,8 @@ pub enum Criterion {
 impl DesignSettings {
     /// Settings for a robot with prior `theta`, sample period `dt_s` and command limits
     /// `command_max`: noise 0.005 m/s and 0.01 rad/s, no slope limit, a 4 m × 4 m floor, 1 %
-    /// on θ1, θ2, θ4, θ6, over a period of 10 s, up to 6 lines per channel (as the harmonics
+    /// on θ1, θ2, θ4, θ6, over a period of 10 s (longer where the band holds fewer than two
+    /// harmonics of it), up to 6 lines per channel (as the harmonics
     /// below f_max allow), the shortest drive as the criterion; lines up to half the robot's
     /// bandwidth 1/(2π max(θ1, θ2)), raised (doubled, to at most twice the bandwidth and a
     /// fifth of the sample rate) only where no design on the lower band stays inside the
@@ -107,7 +116,9 @@ impl DesignSettings {
         let bandwidth = 1.0 / (2.0 * std::f64::consts::PI * theta[0].max(theta[1]));
         let f_max_limit_hz = (2.0 * bandwidth).min(0.2 / dt_s);
         let f_max_hz = (0.5 * bandwidth).min(f_max_limit_hz);
-        let period_s = 10.0;
+        // Two harmonics at least below the band (one line a channel): a slow robot's period
+        // grows beyond 10 s.
+        let period_s = (2.0 / f_max_hz).max(10.0);
         Self {
             theta,
             noise_std: [0.005, 0.01],
@@ -115,6 +126,8 @@ impl DesignSettings {
             command_max,
             slope_max: [f64::INFINITY; 2],
             space_m: [4.0, 4.0],
+            start_pose: [0.0; 3],
+            start_velocity: [0.0; 2],
             accuracy: 0.01,
             targets: vec![0, 1, 3, 5],
             period_s,
@@ -144,6 +157,17 @@ impl DesignSettings {
         }
         if !(self.slope_max.iter().all(|&x| x > 0.0) && self.space_m.iter().all(|&x| x > 0.0)) {
             return bad("slope_max and space_m must be positive".into());
+        }
+        let [x0, y0, psi] = self.start_pose;
+        if !(psi.is_finite()
+            && self.start_velocity.iter().all(|x| x.is_finite())
+            && x0.abs() < 0.5 * self.space_m[0]
+            && y0.abs() < 0.5 * self.space_m[1])
+        {
+            return bad(format!(
+                "start pose {:?} is not inside the {} m × {} m space",
+                self.start_pose, self.space_m[0], self.space_m[1]
+            ));
         }
         if !(self.accuracy > 0.0 && self.accuracy < 1.0) {
             return bad(format!("accuracy {} is not in (0, 1)", self.accuracy));
@@ -288,7 +312,7 @@ fn respond(
     let mut rec = Recording::new("design", t, v_ref, w_ref, vec![0.0; n], vec![0.0; n])?;
     rec.set_meta("command_hold", "zoh");
     let (sim, sens) = model
-        .simulate_with_sensitivities(&s.theta, &rec, &[0.0, 0.0])?
+        .simulate_with_sensitivities(&s.theta, &rec, &s.start_velocity)?
         .ok_or_else(|| Error::InvalidSetting("the model gives no sensitivities".into()))?;
     Ok((rec, sim, sens.theta))
 }
@@ -359,6 +383,17 @@ fn extent(path: &[[f64; 2]]) -> [f64; 2] {
     })
 }
 
+/// Whether a `path` (from the start, in the robot's start frame) stays inside the space from
+/// the settings' start pose.
+fn inside_space(s: &DesignSettings, path: &[[f64; 2]]) -> bool {
+    let [x0, y0, psi] = s.start_pose;
+    let (sn, cs) = psi.sin_cos();
+    path.iter().all(|&[x, y]| {
+        let (wx, wy) = (x0 + x * cs - y * sn, y0 + x * sn + y * cs);
+        wx.abs() <= 0.5 * s.space_m[0] && wy.abs() <= 0.5 * s.space_m[1]
+    })
+}
+
 /// One candidate: its excitation, information, drive and extent.
 struct Candidate {
     exc: Excitation,
@@ -390,10 +425,7 @@ fn candidate(
             &amplitudes(s, &lines[1], &shares[1], 1, 1.0),
         ),
     };
-    let inside = |p: &[[f64; 2]]| {
-        let e = extent(p);
-        e[0] <= 0.5 * s.space_m[0] && e[1] <= 0.5 * s.space_m[1]
-    };
+    let inside = |p: &[[f64; 2]]| inside_space(s, p);
     let eval = |scale: f64| -> Result<Option<Candidate>> {
         let exc = build(scale);
         let (m, log_det) = information(model, s, &exc)?;

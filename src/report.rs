@@ -250,6 +250,23 @@ pub fn online_text(trace: &crate::run::OnlineTrace, id: &Identification) -> Stri
             ),
         };
     }
+    for r in &trace.redesigns {
+        let th = r.theta.map(|x| format!("{x:.4}")).join(", ");
+        let _ = match &r.outcome {
+            Ok((from, f)) => writeln!(
+                s,
+                "  re-designed at {:.1} s for θ̂ = [{th}] from ({:.2}, {:.2}) m: lines to {f:.2} Hz \
+                 from {from:.1} s",
+                r.started_s, r.start_pose[0], r.start_pose[1]
+            ),
+            Err(why) => writeln!(
+                s,
+                "  re-design at {:.1} s for θ̂ = [{th}] from ({:.2}, {:.2}) m: none ({why}); the \
+                 commands went on",
+                r.started_s, r.start_pose[0], r.start_pose[1]
+            ),
+        };
+    }
     let (Some(th), Some(se)) = (trace.theta.last(), trace.std_err.last()) else {
         return s;
     };

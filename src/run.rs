@@ -20,6 +20,11 @@
 //! [excitation]            # the commands sent (a replayed log keeps its own)
 //! type = "thesis_pioneer"
 //!
+//! # [design]              # optional, with stop_when = "accuracy": the excitation designed
+//! # prior = [0.26, 0.25, 0.0, 1.0, 0.0, 1.08]   # (wheelid::design) and re-designed every
+//! # command_max = [0.5, 1.2]                    # every_s from the online θ̂ ([`DesignSection`])
+//! # space_m = [3.0, 3.0]
+//!
 //! [model]                 # type: vw-pd | wheel-pd | a plugin's
 //! type = "vw-pd"
 //!
@@ -71,7 +76,9 @@ use crate::plugins::Plugins;
 use crate::registry::Registry;
 
 mod drive;
+mod redesign;
 pub use drive::{OnlineTrace, drive, drive_online};
+pub use redesign::{CommandSource, DesignSection, RedesignEvent, Redesigner};
 
 /// Where a spec's relative paths are resolved.
 pub struct RunContext<'a> {
@@ -392,6 +399,8 @@ struct RunFile {
     stop_when: StopWhen,
     /// With `stop_when = "accuracy"`: the relative half-width of the 95 % intervals to reach.
     accuracy: Option<f64>,
+    /// `[design]`: the excitation designed and re-designed on the way ([`DesignSection`]).
+    design: Option<DesignSection>,
     output: OutputSection,
 }
 
@@ -595,21 +604,22 @@ pub fn run_with(path: &Path, observer: &dyn Observer, options: RunOptions) -> Re
     let robot_t = table("robot", &file.robot);
     let kind = robot_t.kind()?;
     let mut robot = connect_table(&robot_t, plugins, &plugin_robots, &cx)?;
-    let excitation = match &file.excitation {
-        Some(e) => e.build()?,
-        None => ExcitationConfig::ThesisPioneer.build()?,
-    };
+    let model: std::sync::Arc<dyn RegressorModel> = model.into();
     let duration = run_duration(&file, &kind, path)?;
     let mut online = online_estimator(&file, options, robot.period_s(), path)?;
+    let mut commands = commands_of(&file, &model, robot.period_s(), path)?;
     let recording = drive_online(
         robot.as_mut(),
-        &excitation,
+        commands.as_mut(),
         duration,
         observer,
         online.as_mut().map(|(e, t)| (e, t)),
     )
     .with_context(|| format!("driving the {} robot", robot.name()))?;
-    let online = online.map(|(_, trace)| trace);
+    let mut online = online.map(|(_, trace)| trace);
+    if let (Some(trace), Some(r)) = (online.as_mut(), commands.redesigner()) {
+        trace.redesigns = std::mem::take(&mut r.events);
+    }
     let settings = IdentifySettings {
         bounds,
         estimator: estimator.unwrap_or_else(|| IdentifySettings::default().estimator),
@@ -656,6 +666,65 @@ pub fn run_with(path: &Path, observer: &dyn Observer, options: RunOptions) -> Re
         online,
         files,
     })
+}
+
+/// What a run sends: its `[excitation]` (default: the thesis's Pioneer signal), or with
+/// `[design]` a [`Redesigner`] starting from the design for its prior (else from the
+/// `[excitation]`) and aiming at `accuracy`, for a robot sampled every `period_s`.
+///
+/// # Errors
+/// A bad excitation; `[design]` without `stop_when = "accuracy"`, or its own errors
+/// ([`Redesigner::new`]); naming the file.
+fn commands_of(
+    file: &RunFile,
+    model: &std::sync::Arc<dyn RegressorModel>,
+    period_s: f64,
+    path: &Path,
+) -> Result<Commands> {
+    let excitation = file.excitation.as_ref().map(|e| e.build()).transpose()?;
+    let Some(section) = &file.design else {
+        let e = match excitation {
+            Some(e) => e,
+            None => ExcitationConfig::ThesisPioneer.build()?,
+        };
+        return Ok(Commands::Fixed(Box::new(e)));
+    };
+    let (StopWhen::Accuracy, Some(accuracy)) = (file.stop_when, file.accuracy) else {
+        bail!(
+            "{}: [design] re-designs toward an accuracy: it needs stop_when = \"accuracy\"",
+            path.display()
+        );
+    };
+    let r = Redesigner::new(
+        section.clone(),
+        accuracy,
+        period_s,
+        std::sync::Arc::clone(model),
+        excitation,
+    )
+    .with_context(|| format!("{}: [design]", path.display()))?;
+    Ok(Commands::Redesigned(Box::new(r)))
+}
+
+/// The commands of a run ([`commands_of`]).
+enum Commands {
+    Fixed(Box<wheelid_robots::Excitation>),
+    Redesigned(Box<Redesigner>),
+}
+
+impl Commands {
+    fn as_mut(&mut self) -> &mut dyn CommandSource {
+        match self {
+            Commands::Fixed(e) => e.as_mut(),
+            Commands::Redesigned(r) => r.as_mut(),
+        }
+    }
+    fn redesigner(&mut self) -> Option<&mut Redesigner> {
+        match self {
+            Commands::Fixed(_) => None,
+            Commands::Redesigned(r) => Some(r),
+        }
+    }
 }
 
 /// How long a run drives: `duration_s`; else a replayed log to its end, a live robot 150 s,

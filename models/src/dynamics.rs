@@ -64,13 +64,9 @@ pub const MAX_SUBSTEP: f64 = 0.02;
 /// non-finite simulation instead of taking millions of sub-steps.
 pub const MIN_SUBSTEP: f64 = 1e-4;
 
-/// (v̇, ω̇) of eq. 2.19 for θ (length 6), state (v, ω) and commands (v_ref, ω_ref).
-#[inline]
-
 /// tanh(x), answering ±1 without the call where |x| ≥ 19.5: libm's tanh rounds to exactly ±1
 /// from |x| ≈ 19.06 on, so the result is the same bit for bit. Dry friction's sign is smoothed
-/// by a tanh over a few mm/s, and most samples of a drive are far beyond it: the call was a
-/// quarter of a friction candidate's simulation time.
+/// by a tanh over a few mm/s, and most samples of a drive are far beyond it.
 #[inline(always)]
 pub fn tanh(x: f64) -> f64 {
     if x >= 19.5 {
@@ -81,6 +77,9 @@ pub fn tanh(x: f64) -> f64 {
         x.tanh()
     }
 }
+
+/// (v̇, ω̇) of eq. 2.19 for θ (length 6), state (v, ω) and commands (v_ref, ω_ref).
+#[inline]
 pub fn accel(theta: &[f64; 6], v: f64, w: f64, v_ref: f64, w_ref: f64) -> (f64, f64) {
     let [t1, t2, t3, t4, t5, t6] = *theta;
     (

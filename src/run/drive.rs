@@ -23,6 +23,8 @@ pub struct OnlineTrace {
     /// With `stop_when = "accuracy"`: the target, and the time \[s\] it was reached (`None`:
     /// not within the run's duration).
     pub accuracy: Option<(f64, Option<f64>)>,
+    /// The excitation's re-designs on the way (`[design]`), in order.
+    pub redesigns: Vec<super::RedesignEvent>,
 }
 
 impl OnlineTrace {
@@ -68,11 +70,12 @@ pub fn drive(
     duration: Option<f64>,
     observer: &dyn Observer,
 ) -> Result<Recording> {
-    drive_online(robot, excitation, duration, observer, None)
+    drive_online(robot, &mut excitation.clone(), duration, observer, None)
 }
 
-/// [`drive`], feeding every sample to an online estimator as it comes and keeping its θ̂ in
-/// `trace`; the observer's message then carries θ̂1, θ̂2. Where the trace carries an accuracy
+/// [`drive`] with the commands of `commands` (a fixed excitation, or one re-designed on the
+/// way: [`super::Redesigner`]), feeding every sample to an online estimator as it comes and
+/// keeping its θ̂ in `trace`; the observer's message then carries θ̂1, θ̂2. Where the trace carries an accuracy
 /// target (`stop_when = "accuracy"`), the drive stops at the first sample at which the
 /// estimator is settled and its intervals are within it, and the trace says when.
 ///
@@ -80,7 +83,7 @@ pub fn drive(
 /// As [`drive`].
 pub fn drive_online(
     robot: &mut dyn Robot,
-    excitation: &wheelid_robots::Excitation,
+    commands: &mut dyn super::CommandSource,
     duration: Option<f64>,
     observer: &dyn Observer,
     mut online: Option<(&mut OnlineTheta, &mut OnlineTrace)>,
@@ -101,7 +104,8 @@ pub fn drive_online(
                 Err(e) => return Err(e.into()),
             };
             let t0 = *t0.get_or_insert(o.t);
-            let (v_ref, w_ref) = excitation.at(o.t - t0);
+            let estimator = online.as_ref().map(|(e, _)| &**e);
+            let (v_ref, w_ref) = commands.command(o.t - t0, estimator, &o);
             let (v_ref, w_ref) = robot.send(v_ref, w_ref)?;
             for (c, x) in cols.iter_mut().zip([
                 o.t,
