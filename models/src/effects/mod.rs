@@ -83,7 +83,7 @@ pub fn limit_plausible(
 }
 
 /// A ratio of the right wheel to the left (null 1) is significant (at least 3 standard errors
-/// from 1) and inside the `plausible` range; `what` names it in the report, e.g. "a
+/// from 1), inside the `plausible` range and at least [`MIN_RATIO_EFFECT`] from 1; `what` names it in the report, e.g. "a
 /// right/left tyre radius ratio".
 ///
 /// # Errors
@@ -99,8 +99,22 @@ pub fn ratio_plausible(
     if !plausible.contains(&x) {
         return Err(format!("{what} of {x:.3} is not plausible"));
     }
+    if (x - 1.0).abs() < MIN_RATIO_EFFECT {
+        return Err(format!(
+            "{what} of {x:.4} is within {:.0} % of equal wheels: no asymmetry worth naming",
+            100.0 * MIN_RATIO_EFFECT
+        ));
+    }
     Ok(())
 }
+
+/// The smallest left/right ratio effect named, |ρ − 1| \[-\]: 1 %. Wheel radii and
+/// amplifier gains of one model differ by about that much anyway (tyre wear and pressure,
+/// component tolerances); odometry calibration (Borenstein & Feng's UMBmark, 1996) corrects
+/// such errors, and a diagnosis naming them beside a real effect names a fitting artefact
+/// (seen: a 0.35 % `amp_asymmetry` added to a fitted tyre mismatch on the Pioneer-like robot,
+/// where the tyre's effort map is the controller's, not the wheels').
+pub const MIN_RATIO_EFFECT: f64 = 0.01;
 
 /// One effect the diagnosis can search: a handle on an [`Effect`], compared, hashed and
 /// (de)serialised by name.
