@@ -40,6 +40,16 @@ fn final_parameters(findings: &mut [Finding], cur: &Current) {
     }
 }
 
+/// The index in θ of candidate `c`'s first parameter in `cur`.
+fn time_index(cur: &Current, c: Candidate) -> usize {
+    6 + cur
+        .candidates
+        .iter()
+        .take_while(|&&d| d != c)
+        .map(|d| d.params().len())
+        .sum::<usize>()
+}
+
 /// What the final model leaves unexplained: the channels whose validation fit — counting
 /// only the residual beyond the measurement noise floor
 /// ([`ChannelFit::noise_corrected_fit_percent`]) — is below [`PRACTICAL_FIT_PERCENT`] while
@@ -110,10 +120,29 @@ pub(super) fn assemble(
     nominal_sim: &Outputs,
     seconds: f64,
 ) -> Diagnosis {
-    final_parameters(&mut out.findings, &out.cur);
     // The final model is judged where it makes a claim (outside its unidentified intervals),
-    // and the nominal model alike.
+    // and the nominal model alike; then a change time is placed with every sample inside its
+    // interval (never judged there).
     let judged = data.judged(&[&out.cur]);
+    let findings = &out.findings;
+    let placed = place::change_times(data, &mut out.cur, |c| {
+        let f = findings.iter().find(|f| f.effect == c.name())?;
+        f.std_err.get(c.params()[0].name).copied()
+    });
+    final_parameters(&mut out.findings, &out.cur);
+    for (c, (a, b)) in placed {
+        if let Some(f) = out.findings.iter_mut().find(|f| f.effect == c.name()) {
+            // The time's standard error as placed (final_parameters keeps the training one).
+            let at = time_index(&out.cur, c);
+            if let Some(v) = f.std_err.get_mut(c.params()[0].name) {
+                *v = out.cur.std_err[at];
+            }
+            f.evidence.push_str(&format!(
+                "; its time placed with every sample within [{a:.1}, {b:.1}] s, where the \
+                 training blocks cannot tell"
+            ));
+        }
+    }
     let final_location = if out.findings.is_empty() {
         location.clone()
     } else {

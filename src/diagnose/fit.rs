@@ -253,7 +253,7 @@ const CHI2_1_95: f64 = 3.841;
 /// The ends of the contiguous run of near-minimal costs around the least one (within a
 /// relative `tolerance`), over the `times` (in order) with cost `cost`: the flat minimum of a
 /// change time, whose cost barely moves while it sweeps a validation block.
-fn flat_minimum(
+pub(super) fn flat_minimum(
     times: impl Iterator<Item = f64>,
     cost: impl Fn(f64) -> f64,
     tolerance: f64,

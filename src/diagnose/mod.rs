@@ -63,6 +63,7 @@ mod assemble;
 mod fingerprint;
 mod fit;
 mod locate;
+mod place;
 mod prepare;
 mod score;
 mod screen;
