@@ -23,7 +23,8 @@
 # b393986 (the tyre_asymmetry candidate) — the pairs then led to f2a8227's distinct-nominee
 # rule, so 1017 is tuning now; 1019-1020 (single, clean), 1019 (pairs) and clean 2371-2470
 # once at f2a8227 (1019's gain_decay+payload and 1020's Khepera clamps were then looked at);
-# the next report takes 1021.. and 2471.. .
+# 1021 (single, clean; pairs window_end) and clean 2471-2570 once at 649bfde (1021 then looked
+# at: its payload times led to 642172b); the next report takes 1022.. and 2571.. .
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
