@@ -58,17 +58,22 @@ fn drive(
                     extent[1].max((b - y[0]).abs()),
                 ];
             }
-            identify(
-                std::slice::from_ref(&rec),
-                model,
-                &Ols::default(),
-                &IdentifySettings::default(),
-            )
-            .expect("identifies")
-            .theta
+            identified(&rec, model)
         })
         .collect();
     (thetas, extent)
+}
+
+/// θ of `rec` by the default identification (output error) of `model`.
+fn identified(rec: &wheelid_core::Recording, model: &dyn RegressorModel) -> Vec<f64> {
+    identify(
+        std::slice::from_ref(rec),
+        model,
+        &Ols::default(),
+        &IdentifySettings::default(),
+    )
+    .expect("identifies")
+    .theta
 }
 
 /// Mean and sample standard deviation of θ_i over the runs.
@@ -120,14 +125,7 @@ fn eq_2_19_spread(
                 w_std: noise_std[1],
             });
             let rec = simulate_recording(&robot, &d.excitation, &sim).expect("simulates");
-            identify(
-                std::slice::from_ref(&rec),
-                model,
-                &Ols::default(),
-                &IdentifySettings::default(),
-            )
-            .expect("identifies")
-            .theta
+            identified(&rec, model)
         })
         .collect();
     for i in [0, 1, 3, 5] {
