@@ -13,7 +13,7 @@
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use rand_distr::{Distribution, Normal};
+use rand_distr::Distribution;
 use wheelid_core::{DynamicModel, Error, Recording, Result, Timing};
 
 use crate::excitation::Excitation;
@@ -39,7 +39,8 @@ pub fn simulate_model_recording(
     excitation: &Excitation,
     s: &SimSettings,
 ) -> Result<Recording> {
-    check(profile, model, s)?;
+    check(model, s)?;
+    let wheel_noise = profile.measurement()?;
     let dt = profile.period_s;
     let n = (s.duration_s / dt).floor() as usize + 1;
     let t: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
@@ -60,7 +61,7 @@ pub fn simulate_model_recording(
     rec.set_meta("command_hold", "zoh");
     rec.set_timing(timing);
     let y = model.simulate(theta, &rec, &[0.0, 0.0])?;
-    let [v, w, x, y, phi] = measure(profile, s, &y[0], &y[1])?;
+    let [v, w, x, y, phi] = measure(profile, s, &wheel_noise, &y[0], &y[1]);
     let mut out = Recording::new(rec.source.clone(), rec.t, rec.v_ref, rec.w_ref, v, w)?;
     out.x = Some(x);
     out.y = Some(y);
@@ -83,13 +84,8 @@ pub fn simulate_model_recording(
 }
 
 /// The settings `simulate_model_recording` accepts.
-fn check(profile: &RobotProfile, model: &dyn DynamicModel, s: &SimSettings) -> Result<()> {
-    if !(s.duration_s.is_finite() && s.duration_s > 0.0) {
-        return Err(Error::InvalidSetting(format!(
-            "duration_s = {} must be > 0",
-            s.duration_s
-        )));
-    }
+fn check(model: &dyn DynamicModel, s: &SimSettings) -> Result<()> {
+    s.check_duration()?;
     let channels: Vec<&str> = model.channels().iter().map(|c| c.name).collect();
     if channels != ["v", "w"] {
         return Err(Error::InvalidSetting(format!(
@@ -106,29 +102,21 @@ fn check(profile: &RobotProfile, model: &dyn DynamicModel, s: &SimSettings) -> R
             others.join(", ")
         )));
     }
-    let positive = [
-        ("period_s", profile.period_s),
-        ("wheel_radius", profile.wheel_radius),
-        ("track", profile.track),
-        ("ticks_per_rev", profile.ticks_per_rev),
-    ];
-    if let Some((name, x)) = positive.iter().find(|(_, x)| !(x.is_finite() && *x > 0.0)) {
-        return Err(Error::InvalidSetting(format!(
-            "robot {}: {name} = {x} must be > 0",
-            profile.name
-        )));
-    }
     Ok(())
 }
 
 /// The recorded (v, ω, x, y, φ) of the model's outputs `v`, `w` (window averages with
-/// encoders, instants without).
-fn measure(profile: &RobotProfile, s: &SimSettings, v: &[f64], w: &[f64]) -> Result<[Vec<f64>; 5]> {
+/// encoders, instants without), each wheel's speed with `wheel_noise` [m/s].
+fn measure(
+    profile: &RobotProfile,
+    s: &SimSettings,
+    wheel_noise: &rand_distr::Normal<f64>,
+    v: &[f64],
+    w: &[f64],
+) -> [Vec<f64>; 5] {
     let dt = profile.period_s;
     let (r, d, a) = (profile.wheel_radius, profile.track, profile.a);
     let mut rng = ChaCha8Rng::seed_from_u64(s.seed);
-    let wheel_noise = Normal::new(0.0, profile.wheel_noise_std.max(0.0))
-        .map_err(|e| Error::InvalidSetting(format!("wheel_noise_std: {e}")))?;
     let mut enc = Encoders::default();
     enc.odom = [-a, 0.0, 0.0];
     let n = v.len();
@@ -139,7 +127,7 @@ fn measure(profile: &RobotProfile, s: &SimSettings, v: &[f64], w: &[f64]) -> Res
         let mut m = if s.measurement_noise {
             enc.ang[0] += (v[k] + 0.5 * d * w[k]) * dt / r;
             enc.ang[1] += (v[k] - 0.5 * d * w[k]) * dt / r;
-            enc.read(profile, dt, &mut rng, &wheel_noise)
+            enc.read(profile, dt, &mut rng, wheel_noise)
         } else {
             // Exact increments: the trapezoid of v, ω; odometry as eq. 3.2–3.3.
             let ds = 0.5 * (v[k - 1] + v[k]) * dt;
@@ -164,7 +152,7 @@ fn measure(profile: &RobotProfile, s: &SimSettings, v: &[f64], w: &[f64]) -> Res
         }
         push(m);
     }
-    Ok(out)
+    out
 }
 
 #[cfg(test)]

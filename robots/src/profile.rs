@@ -35,6 +35,29 @@ pub struct RobotProfile {
 }
 
 impl RobotProfile {
+    /// The white noise of each reported wheel speed ([`RobotProfile::wheel_noise_std`],
+    /// negative read as 0), after checking the period, wheels and encoders are > 0: what the
+    /// simulator's measurement model needs.
+    ///
+    /// # Errors
+    /// [`wheelid_core::Error::InvalidSetting`] naming the robot and the first bad number.
+    pub fn measurement(&self) -> wheelid_core::Result<rand_distr::Normal<f64>> {
+        let positive = [
+            ("period_s", self.period_s),
+            ("wheel_radius", self.wheel_radius),
+            ("track", self.track),
+            ("ticks_per_rev", self.ticks_per_rev),
+        ];
+        if let Some((name, x)) = positive.iter().find(|(_, x)| !(x.is_finite() && *x > 0.0)) {
+            return Err(wheelid_core::Error::InvalidSetting(format!(
+                "robot {}: {name} = {x} must be > 0",
+                self.name
+            )));
+        }
+        rand_distr::Normal::new(0.0, self.wheel_noise_std.max(0.0))
+            .map_err(|e| wheelid_core::Error::InvalidSetting(format!("wheel_noise_std: {e}")))
+    }
+
     /// Pioneer 3-DX with the thesis's simulation θ (§4.2, Tables 4.1–4.2 "true" column, the
     /// values of Martins et al. for a Pioneer 3-DX):
     /// θ = (0.2604, 0.2509, −0.000499, 0.9965, 0.00263, 1.0768).

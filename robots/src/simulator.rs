@@ -61,6 +61,24 @@ impl Default for SimSettings {
     }
 }
 
+impl SimSettings {
+    /// Checks `duration_s` is finite and > 0 (what [`simulate_recording`] and
+    /// [`crate::simulate_model_recording`] drive for).
+    ///
+    /// # Errors
+    /// [`Error::InvalidSetting`] naming it.
+    pub fn check_duration(&self) -> Result<()> {
+        if self.duration_s.is_finite() && self.duration_s > 0.0 {
+            Ok(())
+        } else {
+            Err(Error::InvalidSetting(format!(
+                "duration_s = {} must be > 0",
+                self.duration_s
+            )))
+        }
+    }
+}
+
 /// What the robot reports at one sample instant.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Sample {
@@ -118,25 +136,10 @@ impl SimRobot {
     pub fn new(profile: &RobotProfile, settings: &SimSettings) -> Result<Self> {
         wheelid_models::dynamics::check_theta(&profile.theta)?;
         settings.effects.validate()?;
-        let positive = [
-            ("period_s", profile.period_s),
-            ("wheel_radius", profile.wheel_radius),
-            ("track", profile.track),
-            ("ticks_per_rev", profile.ticks_per_rev),
-        ];
-        for (name, x) in positive {
-            if !(x.is_finite() && x > 0.0) {
-                return Err(Error::InvalidSetting(format!(
-                    "robot {}: {name} = {x} must be > 0",
-                    profile.name
-                )));
-            }
-        }
+        let wheel_noise = profile.measurement()?;
         if settings.substeps == 0 {
             return Err(Error::InvalidSetting("substeps must be ≥ 1".into()));
         }
-        let wheel_noise = Normal::new(0.0, profile.wheel_noise_std.max(0.0))
-            .map_err(|e| Error::InvalidSetting(format!("wheel_noise_std: {e}")))?;
         let mut robot = Self {
             profile: profile.clone(),
             effects: settings.effects.clone(),
@@ -492,12 +495,7 @@ pub fn simulate_recording(
     excitation: &Excitation,
     s: &SimSettings,
 ) -> Result<Recording> {
-    if !(s.duration_s.is_finite() && s.duration_s > 0.0) {
-        return Err(Error::InvalidSetting(format!(
-            "duration_s = {} must be > 0",
-            s.duration_s
-        )));
-    }
+    s.check_duration()?;
     let mut robot = SimRobot::new(profile, s)?;
     let n = (s.duration_s / profile.period_s).floor() as usize + 1;
     let mut cols: [Vec<f64>; 8] = std::array::from_fn(|_| Vec::with_capacity(n));

@@ -40,16 +40,6 @@ fn final_parameters(findings: &mut [Finding], cur: &Current) {
     }
 }
 
-/// The index in θ of candidate `c`'s first parameter in `cur`.
-fn time_index(cur: &Current, c: Candidate) -> usize {
-    6 + cur
-        .candidates
-        .iter()
-        .take_while(|&&d| d != c)
-        .map(|d| d.params().len())
-        .sum::<usize>()
-}
-
 /// What the final model leaves unexplained: the channels whose validation fit — counting
 /// only the residual beyond the measurement noise floor
 /// ([`ChannelFit::noise_corrected_fit_percent`]) — is below [`PRACTICAL_FIT_PERCENT`] while
@@ -130,12 +120,11 @@ pub(super) fn assemble(
         f.std_err.get(c.params()[0].name).copied()
     });
     final_parameters(&mut out.findings, &out.cur);
-    for (c, (a, b)) in placed {
+    for (c, (a, b), se) in placed {
         if let Some(f) = out.findings.iter_mut().find(|f| f.effect == c.name()) {
             // The time's standard error as placed (final_parameters keeps the training one).
-            let at = time_index(&out.cur, c);
             if let Some(v) = f.std_err.get_mut(c.params()[0].name) {
-                *v = out.cur.std_err[at];
+                *v = se;
             }
             f.evidence.push_str(&format!(
                 "; its time placed with every sample within [{a:.1}, {b:.1}] s, where the \

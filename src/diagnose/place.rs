@@ -20,12 +20,12 @@ const CHI2_1_95: f64 = 3.841;
 /// `reported` for it when it was found, else the current one) is wider than two sample
 /// periods by every sample (module docs); updates θ, its standard error (half the new flat
 /// interval, at least half the fine scan's step and half a period) and the simulation. Returns, per moved time, the
-/// candidate and the training interval \[s\].
+/// candidate, the training interval \[s\] and the new standard error \[s\].
 pub(super) fn change_times(
     data: &Data,
     cur: &mut Current,
     reported: impl Fn(Candidate) -> Option<f64>,
-) -> Vec<(Candidate, (f64, f64))> {
+) -> Vec<(Candidate, (f64, f64), f64)> {
     let mut moved = Vec::new();
     let model = data.model(&cur.candidates);
     let all: Vec<Vec<bool>> = data.recs.iter().map(|r| vec![true; r.len()]).collect();
@@ -68,7 +68,7 @@ pub(super) fn change_times(
                 cur.theta = th;
                 cur.std_err[at] = (0.5 * (hi - lo)).max(0.5 * fine).max(0.5 * data.dt);
                 cur.sim = sim;
-                moved.push((c, (t - half, t + half)));
+                moved.push((c, (t - half, t + half), cur.std_err[at]));
             }
         }
         at += n;

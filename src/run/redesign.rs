@@ -87,17 +87,11 @@ fn one_second() -> f64 {
 }
 
 /// The design settings of `section` aiming at `accuracy` for a robot sampled every `dt_s`,
-/// for θ `theta` in a `space` \[m\].
-fn settings(
-    section: &DesignSection,
-    accuracy: f64,
-    dt_s: f64,
-    theta: [f64; 6],
-    space: [f64; 2],
-) -> DesignSettings {
+/// for θ `theta` (from the space's centre, facing +x, at rest).
+fn settings(section: &DesignSection, accuracy: f64, dt_s: f64, theta: [f64; 6]) -> DesignSettings {
     let mut s = DesignSettings::for_robot(theta, dt_s, section.command_max);
     s.slope_max = section.slope_max;
-    s.space_m = space;
+    s.space_m = section.space_m;
     s.accuracy = accuracy;
     if let Some(n) = section.noise_std {
         s.noise_std = n;
@@ -119,7 +113,7 @@ pub struct RedesignEvent {
     pub outcome: Result<(f64, f64), String>,
 }
 
-/// A design running on another thread: when it started, for which θ̂, in which square.
+/// A design running on another thread: when it started, for which θ̂, from where.
 struct Pending {
     started_s: f64,
     theta: [f64; 6],
@@ -166,7 +160,7 @@ impl Redesigner {
         }
         let first = match (section.prior, initial) {
             (Some(prior), _) => {
-                let s = settings(&section, accuracy, dt_s, prior, section.space_m);
+                let s = settings(&section, accuracy, dt_s, prior);
                 design(model.as_ref(), &s)?.excitation
             }
             (None, Some(e)) => e,
@@ -231,13 +225,7 @@ impl Redesigner {
             return;
         }
         self.next_s = t + self.section.every_s;
-        let mut s = settings(
-            &self.section,
-            self.accuracy,
-            self.dt_s,
-            theta,
-            self.section.space_m,
-        );
+        let mut s = settings(&self.section, self.accuracy, self.dt_s, theta);
         (s.start_pose, s.start_velocity) = self.at_takeover(t, &theta, o);
         let start_pose = s.start_pose;
         let model = Arc::clone(&self.model);
