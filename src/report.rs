@@ -237,16 +237,39 @@ pub fn online_text(trace: &crate::run::OnlineTrace, id: &Identification) -> Stri
          samples; wheelid::online):"
     );
     if let Some((target, reached)) = trace.accuracy {
+        let whose = if trace.batch_checks.is_empty() {
+            "online"
+        } else {
+            "batch"
+        };
         let _ = match reached {
             Some(t) => writeln!(
                 s,
-                "  stopped at {t:.1} s: the 95 % intervals of θ1, θ2, θ4, θ6 within {:.2} %",
+                "  stopped at {t:.1} s: the {whose} 95 % intervals of θ1, θ2, θ4, θ6 within {:.2} %",
                 100.0 * target
             ),
             None => writeln!(
                 s,
                 "  accuracy {:.2} % NOT reached within the run's duration",
                 100.0 * target
+            ),
+        };
+    }
+    for c in &trace.batch_checks {
+        let _ = match &c.outcome {
+            Ok((th, w)) => writeln!(
+                s,
+                "  batch check of the first {:.1} s ({} samples): θ1, θ2, θ4, θ6 = [{}], \
+                 intervals ± {:.2} %",
+                c.started_s,
+                c.samples,
+                th.map(|x| format!("{x:.4}")).join(", "),
+                100.0 * w
+            ),
+            Err(why) => writeln!(
+                s,
+                "  batch check of the first {:.1} s: no answer ({why})",
+                c.started_s
             ),
         };
     }

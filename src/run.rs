@@ -10,6 +10,7 @@
 //! duration_s = 120.0
 //! stop_when = "duration"  # or "accuracy": until the online 95 % intervals of θ1, θ2, θ4, θ6
 //! # accuracy = 0.01       #   are within this of θ̂, at most duration_s ([`StopWhen`])
+//! # accuracy_of = "batch" #   or the batch answer's, identified every 10 s ([`AccuracyOf`])
 //!
 //! [robot]                 # type: simulator | replay | pioneer | khepera | a plugin's
 //! type = "simulator"
@@ -75,9 +76,11 @@ use crate::online::{OnlineSettings, OnlineTheta};
 use crate::plugins::Plugins;
 use crate::registry::Registry;
 
+mod batch_stop;
 mod drive;
 mod redesign;
-pub use drive::{OnlineTrace, drive, drive_online};
+pub use batch_stop::{BatchCheck, BatchStop, Identify, half_width as batch_half_width};
+pub use drive::{Online, OnlineTrace, drive, drive_online};
 pub use redesign::{CommandSource, DesignSection, RedesignEvent, Redesigner};
 
 /// Where a spec's relative paths are resolved.
@@ -399,6 +402,10 @@ struct RunFile {
     stop_when: StopWhen,
     /// With `stop_when = "accuracy"`: the relative half-width of the 95 % intervals to reach.
     accuracy: Option<f64>,
+    /// With `stop_when = "accuracy"`: whose intervals (the online estimator's, or the batch
+    /// identification's of the recording so far).
+    #[serde(default)]
+    accuracy_of: AccuracyOf,
     /// `[design]`: the excitation designed and re-designed on the way ([`DesignSection`]).
     design: Option<DesignSection>,
     output: OutputSection,
@@ -413,9 +420,29 @@ pub enum StopWhen {
     Duration,
     /// Once the online estimator is settled ([`OnlineTheta::settled`]) and the 95 % intervals
     /// of θ1, θ2, θ4, θ6 are within `accuracy` of θ̂ ([`OnlineTheta::relative_half_width`]),
+    /// or with `accuracy_of = "batch"` once the batch identification's are ([`BatchStop`]);
     /// at most `duration_s` (default 300 s). Turns the online estimator on.
     Accuracy,
 }
+
+/// Whose intervals `stop_when = "accuracy"` watches (`accuracy_of` in a run config).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AccuracyOf {
+    /// The online estimator's ([`OnlineTheta::relative_half_width`]), at every sample.
+    #[default]
+    Online,
+    /// The batch identification's of the recording so far, the run's own (model, solver,
+    /// estimator, conditioning), every [`BATCH_EVERY_S`] of drive time on another thread
+    /// ([`BatchStop`]); needs a model extending eq. 2.19.
+    Batch,
+}
+
+/// Drive time between the batch checks of `accuracy_of = "batch"` \[s\].
+pub const BATCH_EVERY_S: f64 = 10.0;
+/// Drive time from a batch check's start to its answer being taken \[s\] (the drive waits
+/// for it there if it is not done).
+pub const BATCH_LAG_S: f64 = 2.0;
 
 fn typed(name: &str) -> toml::Spanned<toml::Table> {
     let mut t = toml::Table::new();
@@ -605,21 +632,8 @@ pub fn run_with(path: &Path, observer: &dyn Observer, options: RunOptions) -> Re
     let kind = robot_t.kind()?;
     let mut robot = connect_table(&robot_t, plugins, &plugin_robots, &cx)?;
     let model: std::sync::Arc<dyn RegressorModel> = model.into();
-    let duration = run_duration(&file, &kind, path)?;
-    let mut online = online_estimator(&file, options, robot.period_s(), path)?;
-    let mut commands = commands_of(&file, &model, robot.period_s(), path)?;
-    let recording = drive_online(
-        robot.as_mut(),
-        commands.as_mut(),
-        duration,
-        observer,
-        online.as_mut().map(|(e, t)| (e, t)),
-    )
-    .with_context(|| format!("driving the {} robot", robot.name()))?;
-    let mut online = online.map(|(_, trace)| trace);
-    if let (Some(trace), Some(r)) = (online.as_mut(), commands.redesigner()) {
-        trace.redesigns = std::mem::take(&mut r.events);
-    }
+    let solver: std::sync::Arc<dyn Solver> = solver.into();
+    let estimators = std::sync::Arc::new(registry.estimators()?);
     let settings = IdentifySettings {
         bounds,
         estimator: estimator.unwrap_or_else(|| IdentifySettings::default().estimator),
@@ -633,6 +647,48 @@ pub fn run_with(path: &Path, observer: &dyn Observer, options: RunOptions) -> Re
         },
         ..IdentifySettings::default()
     };
+    let identify: Identify = {
+        let (model, solver) = (
+            std::sync::Arc::clone(&model),
+            std::sync::Arc::clone(&solver),
+        );
+        let (estimators, settings) = (std::sync::Arc::clone(&estimators), settings.clone());
+        std::sync::Arc::new(move |rec: &Recording| {
+            let id = identify_with(
+                std::slice::from_ref(rec),
+                model.as_ref(),
+                solver.as_ref(),
+                &estimators,
+                &settings,
+            )?;
+            Ok(id)
+        })
+    };
+    let duration = run_duration(&file, &kind, path)?;
+    let mut online = online_estimator(&file, options, robot.period_s(), path, &identify)?;
+    if online.as_ref().is_some_and(|on| on.batch.is_some())
+        && !wheelid_core::extends_eq_2_19(model.params())
+    {
+        bail!(
+            "{}: accuracy_of = \"batch\" watches θ1, θ2, θ4, θ6: the model {} does not extend \
+             eq. 2.19",
+            path.display(),
+            model.name()
+        );
+    }
+    let mut commands = commands_of(&file, &model, robot.period_s(), path)?;
+    let recording = drive_online(
+        robot.as_mut(),
+        commands.as_mut(),
+        duration,
+        observer,
+        online.as_mut(),
+    )
+    .with_context(|| format!("driving the {} robot", robot.name()))?;
+    let mut online = online.map(|on| on.trace);
+    if let (Some(trace), Some(r)) = (online.as_mut(), commands.redesigner()) {
+        trace.redesigns = std::mem::take(&mut r.events);
+    }
     // The drive is written before it is identified: a robot's run is never lost to an
     // identification that fails.
     let dir = base.join(&file.output.dir);
@@ -648,7 +704,7 @@ pub fn run_with(path: &Path, observer: &dyn Observer, options: RunOptions) -> Re
         std::slice::from_ref(&recording),
         model.as_ref(),
         solver.as_ref(),
-        &registry.estimators()?,
+        &estimators,
         &settings,
     )
     .with_context(|| format!("identifying (the drive is kept in {})", files[0].display()))?;
@@ -749,17 +805,19 @@ fn run_duration(file: &RunFile, kind: &str, path: &Path) -> Result<Option<f64>> 
 
 /// The online estimator a run asks for (its file's `[online]` table, or the defaults with
 /// `options.online` or `stop_when = "accuracy"`) for a robot sampled every `period_s`, with
-/// an empty trace (carrying the accuracy target); `None` when not asked for.
+/// an empty trace (carrying the accuracy target), and with `accuracy_of = "batch"` the batch
+/// check running `identify`; `None` when not asked for.
 ///
 /// # Errors
 /// Invalid `[online]` settings; `stop_when = "accuracy"` without an `accuracy` in (0, 1), or
-/// an `accuracy` without it; naming the file.
+/// an `accuracy` or `accuracy_of = "batch"` without it; naming the file.
 fn online_estimator(
     file: &RunFile,
     options: RunOptions,
     period_s: f64,
     path: &Path,
-) -> Result<Option<(OnlineTheta, OnlineTrace)>> {
+    identify: &Identify,
+) -> Result<Option<Online>> {
     let accuracy = match (file.stop_when, file.accuracy) {
         (StopWhen::Accuracy, Some(a)) if a > 0.0 && a < 1.0 => Some(a),
         (StopWhen::Accuracy, a) => bail!(
@@ -768,6 +826,10 @@ fn online_estimator(
         ),
         (StopWhen::Duration, Some(_)) => bail!(
             "{}: accuracy is read only with stop_when = \"accuracy\"",
+            path.display()
+        ),
+        (StopWhen::Duration, None) if file.accuracy_of == AccuracyOf::Batch => bail!(
+            "{}: accuracy_of is read only with stop_when = \"accuracy\"",
             path.display()
         ),
         (StopWhen::Duration, None) => None,
@@ -783,7 +845,20 @@ fn online_estimator(
         accuracy: accuracy.map(|a| (a, None)),
         ..OnlineTrace::default()
     };
-    Ok(Some((est, trace)))
+    let batch = match (accuracy, file.accuracy_of) {
+        (Some(a), AccuracyOf::Batch) => Some(BatchStop::new(
+            a,
+            BATCH_EVERY_S,
+            BATCH_LAG_S,
+            std::sync::Arc::clone(identify),
+        )?),
+        _ => None,
+    };
+    Ok(Some(Online {
+        estimator: est,
+        trace,
+        batch,
+    }))
 }
 
 /// The model and the solver (with its bounds) the config's `[model]` and `[solver]` tables

@@ -25,6 +25,8 @@ pub struct OnlineTrace {
     pub accuracy: Option<(f64, Option<f64>)>,
     /// The excitation's re-designs on the way (`[design]`), in order.
     pub redesigns: Vec<super::RedesignEvent>,
+    /// With `accuracy_of = "batch"`: the batch checks on the way, in order.
+    pub batch_checks: Vec<super::BatchCheck>,
 }
 
 impl OnlineTrace {
@@ -73,11 +75,25 @@ pub fn drive(
     drive_online(robot, &mut excitation.clone(), duration, observer, None)
 }
 
+/// What a drive estimates on the way: the online estimator, the trace it leaves, and with
+/// `accuracy_of = "batch"` the batch check that stops the drive ([`super::BatchStop`]).
+pub struct Online {
+    /// The recursive estimator, fed every sample.
+    pub estimator: OnlineTheta,
+    /// θ̂ after every sample, and with an accuracy target when it was reached.
+    pub trace: OnlineTrace,
+    /// With `accuracy_of = "batch"`: the drive stops on the batch answer's intervals instead
+    /// of the online estimator's.
+    pub batch: Option<super::BatchStop>,
+}
+
 /// [`drive`] with the commands of `commands` (a fixed excitation, or one re-designed on the
 /// way: [`super::Redesigner`]), feeding every sample to an online estimator as it comes and
-/// keeping its θ̂ in `trace`; the observer's message then carries θ̂1, θ̂2. Where the trace carries an accuracy
-/// target (`stop_when = "accuracy"`), the drive stops at the first sample at which the
-/// estimator is settled and its intervals are within it, and the trace says when.
+/// keeping its θ̂ in its trace; the observer's message then carries θ̂1, θ̂2. Where the trace
+/// carries an accuracy target (`stop_when = "accuracy"`), the drive stops at the first sample
+/// at which the estimator is settled and its intervals are within it — or, with a batch check,
+/// at the first check whose batch intervals are — and the trace says when (and lists the
+/// checks).
 ///
 /// # Errors
 /// As [`drive`].
@@ -86,7 +102,7 @@ pub fn drive_online(
     commands: &mut dyn super::CommandSource,
     duration: Option<f64>,
     observer: &dyn Observer,
-    mut online: Option<(&mut OnlineTheta, &mut OnlineTrace)>,
+    mut online: Option<&mut Online>,
 ) -> Result<Recording> {
     let dt = robot.period_s();
     if !(dt.is_finite() && dt > 0.0) {
@@ -96,6 +112,7 @@ pub fn drive_online(
     let planned = duration.map_or(0, |_| n as u64);
     let mut cols: [Vec<f64>; 8] = std::array::from_fn(|_| Vec::with_capacity(n.min(1 << 20)));
     let mut t0 = None;
+    let (name, timing) = (robot.name().to_owned(), robot.timing());
     let result = (|| -> Result<()> {
         for k in 0..n {
             let o = match robot.read() {
@@ -104,7 +121,7 @@ pub fn drive_online(
                 Err(e) => return Err(e.into()),
             };
             let t0 = *t0.get_or_insert(o.t);
-            let estimator = online.as_ref().map(|(e, _)| &**e);
+            let estimator = online.as_ref().map(|on| &on.estimator);
             let (v_ref, w_ref) = commands.command(o.t - t0, estimator, &o);
             let (v_ref, w_ref) = robot.send(v_ref, w_ref)?;
             for (c, x) in cols.iter_mut().zip([
@@ -119,45 +136,69 @@ pub fn drive_online(
             ]) {
                 c.push(x);
             }
-            match online.as_mut() {
-                Some((est, trace)) => {
-                    let u = est.update(v_ref, w_ref, o.v, o.w);
-                    let th = est.theta();
-                    trace.t.push(o.t);
-                    trace.theta.push(th);
-                    trace.std_err.push(est.std_err());
-                    trace.change.push(u.change);
-                    let msg = format!("driving · online θ̂1 {:.4} θ̂2 {:.4}", th[0], th[1]);
-                    observer.progress(&msg, k as u64 + 1, planned);
-                    if let Some((target, reached)) = &mut trace.accuracy
-                        && est.settled()
-                        && est.relative_half_width() <= *target
-                    {
-                        *reached = Some(o.t - t0);
-                        break;
-                    }
-                }
-                None => observer.progress("driving", k as u64 + 1, planned),
+            let Some(on) = online.as_deref_mut() else {
+                observer.progress("driving", k as u64 + 1, planned);
+                continue;
+            };
+            let u = on.estimator.update(v_ref, w_ref, o.v, o.w);
+            let th = on.estimator.theta();
+            let trace = &mut on.trace;
+            trace.t.push(o.t);
+            trace.theta.push(th);
+            trace.std_err.push(on.estimator.std_err());
+            trace.change.push(u.change);
+            let msg = format!("driving · online θ̂1 {:.4} θ̂2 {:.4}", th[0], th[1]);
+            observer.progress(&msg, k as u64 + 1, planned);
+            let Some((target, reached)) = &mut trace.accuracy else {
+                continue;
+            };
+            let done = match &mut on.batch {
+                Some(b) => b.poll(o.t - t0, || recording_of(&name, timing, cols.clone()).ok()),
+                None => on.estimator.settled() && on.estimator.relative_half_width() <= *target,
+            };
+            if done {
+                *reached = Some(o.t - t0);
+                break;
             }
         }
         Ok(())
     })();
     let stopped = robot.stop();
+    if let Some(on) = online
+        && let Some(b) = &mut on.batch
+    {
+        on.trace.batch_checks = std::mem::take(&mut b.checks);
+    }
     result?;
     stopped?;
-    let [t, v_ref, w_ref, v, w, x, y, phi] = cols;
-    if t.len() < 10 {
-        bail!("the robot gave {} samples; at least 10 are needed", t.len());
+    if cols[0].len() < 10 {
+        bail!(
+            "the robot gave {} samples; at least 10 are needed",
+            cols[0].len()
+        );
     }
-    let mut rec = Recording::new(format!("{} robot", robot.name()), t, v_ref, w_ref, v, w)?;
+    recording_of(&name, timing, cols)
+}
+
+/// The recording of a drive's rows (`t, v_ref, w_ref, v, ω, x, y, ψ`) from the robot `name`
+/// under its stamping convention `timing` (unknown stays unsaid, and identification estimates
+/// it), its commands held (zero-order hold).
+///
+/// # Errors
+/// Rows a recording refuses (not increasing in time, not finite).
+fn recording_of(
+    name: &str,
+    timing: Option<wheelid_core::Timing>,
+    cols: [Vec<f64>; 8],
+) -> Result<Recording> {
+    let [t, v_ref, w_ref, v, w, x, y, phi] = cols;
+    let mut rec = Recording::new(format!("{name} robot"), t, v_ref, w_ref, v, w)?;
     rec.x = Some(x);
     rec.y = Some(y);
     rec.phi = Some(phi);
-    rec.set_meta("robot", robot.name());
+    rec.set_meta("robot", name);
     rec.set_meta("command_hold", "zoh");
-    // The stamping convention as the backend knows it; unknown stays unsaid, and identification
-    // estimates it.
-    if let Some(timing) = robot.timing() {
+    if let Some(timing) = timing {
         rec.set_timing(timing);
     }
     Ok(rec)

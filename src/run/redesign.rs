@@ -92,7 +92,8 @@ fn settings(section: &DesignSection, accuracy: f64, dt_s: f64, theta: [f64; 6]) 
     let mut s = DesignSettings::for_robot(theta, dt_s, section.command_max);
     s.slope_max = section.slope_max;
     s.space_m = section.space_m;
-    s.accuracy = accuracy;
+    // The run's accuracy is a 95 % half-width; the design's a relative standard error.
+    s.accuracy = accuracy / 1.96;
     if let Some(n) = section.noise_std {
         s.noise_std = n;
     }
