@@ -24,7 +24,8 @@
 # rule, so 1017 is tuning now; 1019-1020 (single, clean), 1019 (pairs) and clean 2371-2470
 # once at f2a8227 (1019's gain_decay+payload and 1020's Khepera clamps were then looked at);
 # 1021 (single, clean; pairs window_end) and clean 2471-2570 once at 649bfde (1021 then looked
-# at: its payload times led to 642172b); the next report takes 1022.. and 2571.. .
+# at: its payload times led to 642172b); 1022 (single, clean; pairs window_end) and clean
+# 2571-2670 once at bab99f1; the next report takes 1023.. and 2671.. .
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
