@@ -11,6 +11,7 @@
 //! stop_when = "duration"  # or "accuracy": until the online 95 % intervals of θ1, θ2, θ4, θ6
 //! # accuracy = 0.01       #   are within this of θ̂, at most duration_s ([`StopWhen`])
 //! # accuracy_of = "batch" #   or the batch answer's, identified every 10 s ([`AccuracyOf`])
+//! # accuracy_every_s = 5.0 #  (the batch checks' period)
 //!
 //! [robot]                 # type: simulator | replay | pioneer | khepera | a plugin's
 //! type = "simulator"
@@ -406,6 +407,9 @@ struct RunFile {
     /// identification's of the recording so far).
     #[serde(default)]
     accuracy_of: AccuracyOf,
+    /// With `accuracy_of = "batch"`: drive time between the checks \[s\] (default
+    /// [`BATCH_EVERY_S`]).
+    accuracy_every_s: Option<f64>,
     /// `[design]`: the excitation designed and re-designed on the way ([`DesignSection`]).
     design: Option<DesignSection>,
     output: OutputSection,
@@ -433,15 +437,17 @@ pub enum AccuracyOf {
     #[default]
     Online,
     /// The batch identification's of the recording so far, the run's own (model, solver,
-    /// estimator, conditioning), every [`BATCH_EVERY_S`] of drive time on another thread
-    /// ([`BatchStop`]); needs a model extending eq. 2.19.
+    /// estimator, conditioning), every `accuracy_every_s` ([`BATCH_EVERY_S`]) of drive time on
+    /// another thread ([`BatchStop`]); needs a model extending eq. 2.19.
     Batch,
 }
 
-/// Drive time between the batch checks of `accuracy_of = "batch"` \[s\].
+/// Drive time between the batch checks of `accuracy_of = "batch"` by default \[s\]
+/// (`accuracy_every_s`).
 pub const BATCH_EVERY_S: f64 = 10.0;
-/// Drive time from a batch check's start to its answer being taken \[s\] (the drive waits
-/// for it there if it is not done).
+/// Drive time from a batch check's start to its answer being taken \[s\], at most (half the
+/// checks' period where that is shorter; the drive waits for the answer there if it is not
+/// done).
 pub const BATCH_LAG_S: f64 = 2.0;
 
 fn typed(name: &str) -> toml::Spanned<toml::Table> {
@@ -845,13 +851,17 @@ fn online_estimator(
         accuracy: accuracy.map(|a| (a, None)),
         ..OnlineTrace::default()
     };
-    let batch = match (accuracy, file.accuracy_of) {
-        (Some(a), AccuracyOf::Batch) => Some(BatchStop::new(
-            a,
-            BATCH_EVERY_S,
-            BATCH_LAG_S,
-            std::sync::Arc::clone(identify),
-        )?),
+    let batch = match (accuracy, file.accuracy_of, file.accuracy_every_s) {
+        (Some(a), AccuracyOf::Batch, every) => {
+            let every = every.unwrap_or(BATCH_EVERY_S);
+            let lag = BATCH_LAG_S.min(0.5 * every);
+            let stop = BatchStop::new(a, every, lag, std::sync::Arc::clone(identify));
+            Some(stop.with_context(|| format!("{}: accuracy_every_s", path.display()))?)
+        }
+        (_, AccuracyOf::Online, Some(_)) => bail!(
+            "{}: accuracy_every_s is read only with accuracy_of = \"batch\"",
+            path.display()
+        ),
         _ => None,
     };
     Ok(Some(Online {

@@ -651,14 +651,29 @@ fn a_run_re_designs_its_excitation_from_the_online_estimate() {
 /// examples/configs/run_physics_redesign.toml with `edits` (from → to) and its outputs in
 /// `dir/out`, written as `dir/name`.
 fn redesign_config(dir: &Path, name: &str, edits: &[(&str, &str)]) -> PathBuf {
-    let mut text = std::fs::read_to_string(config("run_physics_redesign.toml")).expect("config");
+    edited_config("run_physics_redesign.toml", dir, name, edits)
+}
+
+/// The example config `example` with `edits` (from → to) and its outputs in `dir/out`,
+/// written as `dir/name`.
+fn edited_config(example: &str, dir: &Path, name: &str, edits: &[(&str, &str)]) -> PathBuf {
+    let mut text = std::fs::read_to_string(config(example)).expect("config");
     for (from, to) in edits {
         assert!(text.contains(from), "the example has no {from:?}");
         text = text.replace(from, to);
     }
-    let text = text.replace("../../target/run/physics_redesign", "out");
+    let text: Vec<String> = text
+        .lines()
+        .map(|l| {
+            if l.starts_with("dir = \"../../target/run/") {
+                "dir = \"out\"".to_owned()
+            } else {
+                l.to_owned()
+            }
+        })
+        .collect();
     let path = dir.join(name);
-    std::fs::write(&path, text).expect("write");
+    std::fs::write(&path, text.join("\n")).expect("write");
     path
 }
 
@@ -672,8 +687,10 @@ fn redesign_config(dir: &Path, name: &str, edits: &[(&str, &str)]) -> PathBuf {
 /// 0.0081: the re-design's lines to 0.62 Hz excite what eq. 2.19 leaves out of this robot);
 /// each check's width is what
 /// `identify` gives on the recording's first samples (recomputed here to 1e-9); the thesis's Pioneer signal on the
-/// same robot is still at ± 3.3 % after 150 s. `accuracy_of = "batch"` without the stop
-/// rule is a clear error.
+/// same robot is still at ± 3.3 % after 150 s. The rigid-body Khepera-like robot checked every
+/// 2 s (`accuracy_every_s`, run_physics_until_accurate.toml): ± 0.64 % after 2 s, stop at
+/// 3.0 s, the answer within 1 % of the map. `accuracy_of = "batch"` without the stop rule, or
+/// `accuracy_every_s` without it, is a clear error.
 #[test]
 fn a_run_stops_once_the_batch_intervals_reach_the_accuracy() {
     let dir = tempfile::tempdir().expect("tempdir");
@@ -761,10 +778,44 @@ fn a_run_stops_once_the_batch_intervals_reach_the_accuracy() {
     eprintln!("thesis signal: ± {:.2} % after 150 s", 100.0 * w150);
     assert!(w150 > 0.03, "thesis signal ± {w150} after 150 s");
 
+    // The rigid-body Khepera-like robot of run_physics_until_accurate.toml, checked every
+    // 2 s: ± 0.64 % after 2 s, stop at 3.0 s, within 1 % of the map.
+    let every2 = [(
+        "accuracy = 0.01\n",
+        "accuracy = 0.01\naccuracy_of = \"batch\"\naccuracy_every_s = 2.0\n",
+    )];
+    let k = run(
+        &edited_config(
+            "run_physics_until_accurate.toml",
+            dir.path(),
+            "k.toml",
+            &every2,
+        ),
+        &Silent,
+    )
+    .expect("runs");
+    let k_trace = k.online.as_ref().expect("trace");
+    let k_t = k_trace.accuracy.and_then(|(_, r)| r).expect("reached");
+    let (_, w2) = k_trace.batch_checks[0].outcome.clone().expect("an answer");
+    eprintln!(
+        "khepera: ± {:.2} % after 2 s, stop at {k_t:.2} s",
+        100.0 * w2
+    );
+    assert!((k_t - 3.0).abs() < 0.05 && w2 < 0.01, "{k_t} s, ± {w2}");
+    let k_map = wheelid::robots::physics::PhysicalProfile::khepera3().theta();
+    assert_close(&k.identification.theta, &k_map, 0.01, "batch at the stop");
+
     let head = "duration_s = 5.0\n[robot]\ntype = \"simulator\"\n[output]\ndir = \"o\"\n";
     let e = run_text(&format!("accuracy_of = \"batch\"\n{head}"));
     assert!(
         e.contains("bad.toml: accuracy_of is read only with stop_when"),
+        "{e}"
+    );
+    let e = run_text(&format!(
+        "stop_when = \"accuracy\"\naccuracy = 0.02\naccuracy_every_s = 5.0\n{head}"
+    ));
+    assert!(
+        e.contains("bad.toml: accuracy_every_s is read only with accuracy_of = \"batch\""),
         "{e}"
     );
 }
