@@ -640,36 +640,8 @@ pub fn run_with(path: &Path, observer: &dyn Observer, options: RunOptions) -> Re
     let model: std::sync::Arc<dyn RegressorModel> = model.into();
     let solver: std::sync::Arc<dyn Solver> = solver.into();
     let estimators = std::sync::Arc::new(registry.estimators()?);
-    let settings = IdentifySettings {
-        bounds,
-        estimator: estimator.unwrap_or_else(|| IdentifySettings::default().estimator),
-        condition: ConditionSettings {
-            cutoff_hz: file.identify.cutoff_hz,
-            order: file
-                .identify
-                .order
-                .unwrap_or(ConditionSettings::default().order),
-            ..ConditionSettings::default()
-        },
-        ..IdentifySettings::default()
-    };
-    let identify: Identify = {
-        let (model, solver) = (
-            std::sync::Arc::clone(&model),
-            std::sync::Arc::clone(&solver),
-        );
-        let (estimators, settings) = (std::sync::Arc::clone(&estimators), settings.clone());
-        std::sync::Arc::new(move |rec: &Recording| {
-            let id = identify_with(
-                std::slice::from_ref(rec),
-                model.as_ref(),
-                solver.as_ref(),
-                &estimators,
-                &settings,
-            )?;
-            Ok(id)
-        })
-    };
+    let settings = identify_settings(&file.identify, bounds, estimator);
+    let identify = identify_fn(&model, &solver, &estimators, &settings);
     let duration = run_duration(&file, &kind, path)?;
     let mut online = online_estimator(&file, options, robot.period_s(), path, &identify)?;
     if online.as_ref().is_some_and(|on| on.batch.is_some())
@@ -727,6 +699,47 @@ pub fn run_with(path: &Path, observer: &dyn Observer, options: RunOptions) -> Re
         identification,
         online,
         files,
+    })
+}
+
+/// The identification settings of a run: its `[identify]` section's conditioning, the
+/// solver's `bounds` and the `estimator` named (default: output error).
+fn identify_settings(
+    section: &IdentifySection,
+    bounds: Option<Vec<(f64, f64)>>,
+    estimator: Option<String>,
+) -> IdentifySettings {
+    IdentifySettings {
+        bounds,
+        estimator: estimator.unwrap_or_else(|| IdentifySettings::default().estimator),
+        condition: ConditionSettings {
+            cutoff_hz: section.cutoff_hz,
+            order: section.order.unwrap_or(ConditionSettings::default().order),
+            ..ConditionSettings::default()
+        },
+        ..IdentifySettings::default()
+    }
+}
+
+/// The run's identification as a function of a recording (for the batch checks on the way,
+/// [`BatchStop`]): `model`, `solver`, `estimators` and `settings` shared with it.
+fn identify_fn(
+    model: &std::sync::Arc<dyn RegressorModel>,
+    solver: &std::sync::Arc<dyn Solver>,
+    estimators: &std::sync::Arc<Vec<Box<dyn wheelid_core::Estimator>>>,
+    settings: &IdentifySettings,
+) -> Identify {
+    let (model, solver) = (std::sync::Arc::clone(model), std::sync::Arc::clone(solver));
+    let (estimators, settings) = (std::sync::Arc::clone(estimators), settings.clone());
+    std::sync::Arc::new(move |rec: &Recording| {
+        let id = identify_with(
+            std::slice::from_ref(rec),
+            model.as_ref(),
+            solver.as_ref(),
+            &estimators,
+            &settings,
+        )?;
+        Ok(id)
     })
 }
 
