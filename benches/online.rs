@@ -1,13 +1,14 @@
 //! Criterion benchmark of the online estimator (issue 18, `wheelid::online`): one update per
-//! sample — the prefilter, two 4-parameter RLS steps with change detection — and the same with
-//! θ̂ and its standard errors read after every sample, over a 10-minute 50 Hz recording of the
+//! sample — the prefilter, two 4-parameter RLS steps with change detection; with the split
+//! fixed, two 3-parameter ones — and the same with θ̂ and its standard errors read after
+//! every sample, over a 10-minute 50 Hz recording of the
 //! simulated Khepera III (30,001 samples). Criterion reports the time per recording; per
 //! sample it is that over 30,001 (goal ≤ 200 ns).
 //!
 //! Run: `cargo bench --bench online`.
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
-use wheelid::online::{OnlineSettings, OnlineTheta};
+use wheelid::online::{OnlineSettings, OnlineTheta, Split};
 use wheelid::robots::{Excitation, RobotProfile, SimSettings, simulate_recording};
 
 fn bench(c: &mut Criterion) {
@@ -31,6 +32,21 @@ fn bench(c: &mut Criterion) {
     g.bench_function("update per recording", |b| {
         b.iter(|| {
             let mut est = OnlineTheta::new(OnlineSettings::default(), dt).expect("settings");
+            for k in 0..rec.len() {
+                est.update(rec.v_ref[k], rec.w_ref[k], rec.v[k], rec.w[k]);
+            }
+            est.theta()
+        })
+    });
+    // With the split of u_k and u_{k−1} fixed by the stamping (as `wheelid run` sets it):
+    // three-parameter regressions, one logarithm a channel per update.
+    let fixed = OnlineSettings {
+        split: Some(Split::WindowAverage),
+        ..OnlineSettings::default()
+    };
+    g.bench_function("update per recording, split fixed", |b| {
+        b.iter(|| {
+            let mut est = OnlineTheta::new(fixed, dt).expect("settings");
             for k in 0..rec.len() {
                 est.update(rec.v_ref[k], rec.w_ref[k], rec.v[k], rec.w[k]);
             }

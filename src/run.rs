@@ -643,7 +643,8 @@ pub fn run_with(path: &Path, observer: &dyn Observer, options: RunOptions) -> Re
     let settings = identify_settings(&file.identify, bounds, estimator);
     let identify = identify_fn(&model, &solver, &estimators, &settings);
     let duration = run_duration(&file, &kind, path)?;
-    let mut online = online_estimator(&file, options, robot.period_s(), path, &identify)?;
+    let stamping = (robot.period_s(), robot.timing());
+    let mut online = online_estimator(&file, options, stamping, path, &identify)?;
     if online.as_ref().is_some_and(|on| on.batch.is_some())
         && !wheelid_core::extends_eq_2_19(model.params())
     {
@@ -823,7 +824,8 @@ fn run_duration(file: &RunFile, kind: &str, path: &Path) -> Result<Option<f64>> 
 }
 
 /// The online estimator a run asks for (its file's `[online]` table, or the defaults with
-/// `options.online` or `stop_when = "accuracy"`) for a robot sampled every `period_s`, with
+/// `options.online` or `stop_when = "accuracy"`) for a robot sampled every `period_s` under
+/// the stamping `timing` (which fixes the split where `[online]` does not: [`crate::online::Split`]), with
 /// an empty trace (carrying the accuracy target), and with `accuracy_of = "batch"` the batch
 /// check running `identify`; `None` when not asked for.
 ///
@@ -833,7 +835,7 @@ fn run_duration(file: &RunFile, kind: &str, path: &Path) -> Result<Option<f64>> 
 fn online_estimator(
     file: &RunFile,
     options: RunOptions,
-    period_s: f64,
+    (period_s, timing): (f64, Option<wheelid_core::Timing>),
     path: &Path,
     identify: &Identify,
 ) -> Result<Option<Online>> {
@@ -858,7 +860,7 @@ fn online_estimator(
         (None, true) => OnlineSettings::default(),
         (None, false) => return Ok(None),
     };
-    let est = OnlineTheta::new(settings, period_s)
+    let est = OnlineTheta::new(settings.for_timing(timing), period_s)
         .with_context(|| format!("{}: [online]", path.display()))?;
     let trace = OnlineTrace {
         accuracy: accuracy.map(|a| (a, None)),
