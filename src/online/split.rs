@@ -67,9 +67,20 @@ fn shares(split: Split, a: f64) -> ([f64; 2], [f64; 2]) {
     }
 }
 
-/// One channel's recursive estimator: four free parameters, or three with the split fixed.
+/// One channel's recursive estimator: four free parameters, or three with the split fixed;
+/// with (a, β0, β1, c) and the next update's weights kept from its last update (read several
+/// times a sample: one logarithm an update instead of one a reading).
 #[derive(Debug, Clone)]
-pub(super) enum ChannelRls {
+pub(super) struct ChannelRls {
+    form: Form,
+    /// (a, β0, β1, c) at the estimate.
+    theta: [f64; 4],
+    /// (w0, w1) at â where it is a share (0 < â < 1), else at [`A_START`].
+    weights: [f64; 2],
+}
+
+#[derive(Debug, Clone)]
+enum Form {
     Free(Rls<4>),
     Fixed(Rls<3>, Split),
 }
@@ -78,16 +89,34 @@ impl ChannelRls {
     /// # Errors
     /// As [`Rls::new`].
     pub(super) fn new(split: Split, settings: RlsSettings) -> Result<Self> {
-        Ok(match split {
-            Split::Free => Self::Free(Rls::new(settings, [0.0; 4])?),
-            fixed => Self::Fixed(Rls::new(settings, [0.0; 3])?, fixed),
-        })
+        let form = match split {
+            Split::Free => Form::Free(Rls::new(settings, [0.0; 4])?),
+            fixed => Form::Fixed(Rls::new(settings, [0.0; 3])?, fixed),
+        };
+        let mut c = Self {
+            form,
+            theta: [0.0; 4],
+            weights: [1.0, 0.0],
+        };
+        c.refresh();
+        Ok(c)
     }
 
-    /// â where it is a share (0 < â < 1), else [`A_START`].
-    fn a_now(rls: &Rls<3>) -> f64 {
-        let a = rls.theta()[0];
-        if a > 0.0 && a < 1.0 { a } else { A_START }
+    /// (a, β0, β1, c) and the weights from the estimate.
+    fn refresh(&mut self) {
+        match &self.form {
+            Form::Free(r) => self.theta = r.theta(),
+            Form::Fixed(r, s) => {
+                let [a, sum, c] = r.theta();
+                let (w, _) = shares(*s, a);
+                self.theta = [a, sum * w[0], sum * w[1], c];
+                self.weights = if a > 0.0 && a < 1.0 {
+                    w
+                } else {
+                    shares(*s, A_START).0
+                };
+            }
+        }
     }
 
     /// The three-parameter regressor of a four-parameter row [y_k, u_k, u_{k−1}, n̄_k] under
@@ -98,45 +127,37 @@ impl ChannelRls {
 
     /// Least-squares update on `row` = [y_k, u_k, u_{k−1}, n̄_k] toward `y` = y_{k+1}.
     pub(super) fn update(&mut self, row: &[f64; 4], y: f64) -> RlsUpdate {
-        match self {
-            Self::Free(r) => r.update(row, y),
-            Self::Fixed(r, s) => {
-                let (w, _) = shares(*s, Self::a_now(r));
-                r.update(&Self::reduce(w, row), y)
-            }
-        }
+        let step = match &mut self.form {
+            Form::Free(r) => r.update(row, y),
+            Form::Fixed(r, _) => r.update(&Self::reduce(self.weights, row), y),
+        };
+        self.refresh();
+        step
     }
 
     /// Instrumental-variables update ([`Rls::update_iv`]) with instruments `zeta` (a row of
     /// the same form).
     pub(super) fn update_iv(&mut self, row: &[f64; 4], zeta: &[f64; 4], y: f64) -> RlsUpdate {
-        match self {
-            Self::Free(r) => r.update_iv(row, zeta, y),
-            Self::Fixed(r, s) => {
-                let (w, _) = shares(*s, Self::a_now(r));
-                r.update_iv(&Self::reduce(w, row), &Self::reduce(w, zeta), y)
-            }
-        }
+        let w = self.weights;
+        let step = match &mut self.form {
+            Form::Free(r) => r.update_iv(row, zeta, y),
+            Form::Fixed(r, _) => r.update_iv(&Self::reduce(w, row), &Self::reduce(w, zeta), y),
+        };
+        self.refresh();
+        step
     }
 
     /// (a, β0, β1, c).
     pub(super) fn theta(&self) -> [f64; 4] {
-        match self {
-            Self::Free(r) => r.theta(),
-            Self::Fixed(r, s) => {
-                let [a, sum, c] = r.theta();
-                let ([w0, w1], _) = shares(*s, a);
-                [a, sum * w0, sum * w1, c]
-            }
-        }
+        self.theta
     }
 
     /// The covariance of (a, β0, β1, c) (with the split fixed: J C Jᵀ, J = ∂(a, β0, β1, c)/
     /// ∂(a, s, c)).
     pub(super) fn covariance(&self) -> [[f64; 4]; 4] {
-        match self {
-            Self::Free(r) => r.covariance(),
-            Self::Fixed(r, s) => {
+        match &self.form {
+            Form::Free(r) => r.covariance(),
+            Form::Fixed(r, s) => {
                 let [a, sum, _] = r.theta();
                 let ([w0, w1], [d0, d1]) = shares(*s, a);
                 let j = [
@@ -163,9 +184,9 @@ impl ChannelRls {
 
     /// Alarms raised so far.
     pub(super) fn changes(&self) -> u64 {
-        match self {
-            Self::Free(r) => r.changes(),
-            Self::Fixed(r, _) => r.changes(),
+        match &self.form {
+            Form::Free(r) => r.changes(),
+            Form::Fixed(r, _) => r.changes(),
         }
     }
 }
