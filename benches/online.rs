@@ -33,7 +33,7 @@ fn bench(c: &mut Criterion) {
         b.iter(|| {
             let mut est = OnlineTheta::new(OnlineSettings::default(), dt).expect("settings");
             for k in 0..rec.len() {
-                est.update(rec.v_ref[k], rec.w_ref[k], rec.v[k], rec.w[k]);
+                est.update(rec.t[k], rec.v_ref[k], rec.w_ref[k], rec.v[k], rec.w[k]);
             }
             est.theta()
         })
@@ -48,7 +48,7 @@ fn bench(c: &mut Criterion) {
         b.iter(|| {
             let mut est = OnlineTheta::new(fixed, dt).expect("settings");
             for k in 0..rec.len() {
-                est.update(rec.v_ref[k], rec.w_ref[k], rec.v[k], rec.w[k]);
+                est.update(rec.t[k], rec.v_ref[k], rec.w_ref[k], rec.v[k], rec.w[k]);
             }
             est.theta()
         })
@@ -58,7 +58,7 @@ fn bench(c: &mut Criterion) {
             let mut est = OnlineTheta::new(OnlineSettings::default(), dt).expect("settings");
             let mut sum = 0.0;
             for k in 0..rec.len() {
-                est.update(rec.v_ref[k], rec.w_ref[k], rec.v[k], rec.w[k]);
+                est.update(rec.t[k], rec.v_ref[k], rec.w_ref[k], rec.v[k], rec.w[k]);
                 sum += est.theta()[0] + est.std_err()[0];
             }
             sum

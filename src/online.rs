@@ -110,9 +110,9 @@ impl Default for OnlineSettings {
     }
 }
 
-/// The filtered signals: u and y of each channel, n (ω², v ω), and the auxiliary model's v̂,
-/// ω̂, ω̂², v̂ ω̂.
-const SIGNALS: usize = 10;
+/// The filtered signals: u and y of each channel, n (ω², v ω), the auxiliary model's v̂,
+/// ω̂, ω̂², v̂ ω̂, and each channel's jitter correction d (module `split`).
+const SIGNALS: usize = 12;
 
 /// What one update did.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -145,6 +145,10 @@ pub struct OnlineTheta {
     since_reset: [u64; 2],
     /// Samples of warm-up before `form`.
     warmup: u64,
+    /// The stamps of the last two samples (newest first), once there \[s\].
+    times: [Option<f64>; 2],
+    /// The last sample as measured: (v, ω, ω², v ω).
+    measured: [f64; 4],
 }
 
 impl OnlineTheta {
@@ -200,44 +204,56 @@ impl OnlineTheta {
             commands: [None; 2],
             since_reset: [0; 2],
             warmup: ((settings.warmup_s.max(0.0) / dt_s).ceil() as u64).max(1),
+            times: [None; 2],
+            measured: [0.0; 4],
         })
     }
 
-    /// Takes the next sample: the commands `v_ref` \[m/s\], `w_ref` \[rad/s\] applied from
-    /// it on, and the measured `v` \[m/s\], `w` \[rad/s\] it carries. The first two samples
-    /// only fill the filters. A non-finite sample is skipped.
-    pub fn update(&mut self, v_ref: f64, w_ref: f64, v: f64, w: f64) -> OnlineUpdate {
+    /// Takes the next sample, stamped `t` \[s\]: the commands `v_ref` \[m/s\], `w_ref`
+    /// \[rad/s\] applied from it on, and the measured `v` \[m/s\], `w` \[rad/s\] it carries.
+    /// Stamps that are not `dt` apart (host jitter) enter the sampled equation (module
+    /// `split`, "Jitter"); a stamp not after the last one is read as `dt` after it. The first
+    /// two samples only fill the filters. A non-finite sample is skipped.
+    pub fn update(&mut self, t: f64, v_ref: f64, w_ref: f64, v: f64, w: f64) -> OnlineUpdate {
         let quiet = OnlineUpdate { change: [false; 2] };
-        if ![v_ref, w_ref, v, w].iter().all(|x| x.is_finite()) {
+        if ![t, v_ref, w_ref, v, w].iter().all(|x| x.is_finite()) {
             return quiet;
         }
+        let rho = self.period_ratios(t);
         let raw = [v_ref, w_ref, v, w, w * w, v * w];
         let refined = [self.refined(0), self.refined(1)];
-        self.sim = self.simulate([v, w], refined);
+        let corrections = self.jitter_corrections(rho, [w * w, v * w]);
+        self.sim = self.simulate([v, w], refined, rho);
         let [vh, wh] = self.sim;
         let p = self.pole;
         let mut now = [0.0; SIGNALS];
-        let signals = raw.into_iter().chain([vh, wh, wh * wh, vh * wh]);
+        let signals = raw
+            .into_iter()
+            .chain([vh, wh, wh * wh, vh * wh])
+            .chain(corrections);
         for ((s, x), f) in self.state.iter_mut().zip(signals).zip(&mut now) {
             s[0] = p * s[0] + (1.0 - p) * x;
             s[1] = p * s[1] + (1.0 - p) * s[0];
             *f = s[1];
         }
         self.commands = [Some([v_ref, w_ref]), self.commands[0]];
+        self.times = [Some(t), self.times[0]];
+        self.measured = [v, w, w * w, v * w];
         let [Some(q), Some(o)] = self.last else {
             self.last = [Some(now), self.last[0]];
             return quiet;
         };
         self.last = [Some(now), Some(q)];
-        // [y_k, u_k, u_{k−1}, n̄_k] → y_{k+1} per channel; its instruments with the auxiliary
-        // model's v̂_k (ω̂_k) and n̄_k.
+        // [y_k, u_k, u_{k−1}, n̄_k] → y_{k+1} − d_k per channel; its instruments with the
+        // auxiliary model's v̂_k (ω̂_k) and n̄_k.
         let change: [bool; 2] = std::array::from_fn(|i| {
             let row = [q[2 + i], q[i], o[i], 0.5 * (q[4 + i] + now[4 + i])];
+            let target = now[2 + i] - now[10 + i];
             let step = if refined[i] {
                 let zeta = [q[6 + i], q[i], o[i], 0.5 * (q[8 + i] + now[8 + i])];
-                self.rls[i].update_iv(&row, &zeta, now[2 + i])
+                self.rls[i].update_iv(&row, &zeta, target)
             } else {
-                self.rls[i].update(&row, now[2 + i])
+                self.rls[i].update(&row, target)
             };
             self.since_reset[i] = if step.change {
                 0
@@ -247,6 +263,34 @@ impl OnlineTheta {
             step.change
         });
         OnlineUpdate { change }
+    }
+
+    /// (T_k/T, T_{k−1}/T): the periods from the last sample to the one stamped `t` and the one
+    /// before it, in nominal periods (1 where a stamp is missing or not after the last).
+    fn period_ratios(&self, t: f64) -> [f64; 2] {
+        let ratio = |later: f64, earlier: Option<f64>| match earlier {
+            Some(e) if later > e => (later - e) / self.dt,
+            _ => 1.0,
+        };
+        let rho = ratio(t, self.times[0]);
+        let before = match self.times[0] {
+            Some(q) => ratio(q, self.times[1]),
+            None => 1.0,
+        };
+        [rho, before]
+    }
+
+    /// Each channel's jitter correction d_k for the step from the last sample to this one
+    /// (`n_now`: this sample's measured ω², v ω).
+    fn jitter_corrections(&self, rho: [f64; 2], n_now: [f64; 2]) -> [f64; 2] {
+        let [Some(u0), u1] = self.commands else {
+            return [0.0; 2];
+        };
+        let u1 = u1.unwrap_or(u0);
+        std::array::from_fn(|i| {
+            let n = 0.5 * (self.measured[2 + i] + n_now[i]);
+            self.rls[i].jitter_correction(rho, self.measured[i], [u0[i], u1[i]], n)
+        })
     }
 
     /// Whether channel `i` takes its instruments at this sample: after the warm-up from its
@@ -260,7 +304,7 @@ impl OnlineTheta {
     /// The auxiliary model's (v̂, ω̂) at this sample (module docs, "Instruments"): one step of
     /// each instrumented channel's difference equation from the last sample; the measured
     /// value where a channel is not instrumented (so that its model starts from the robot).
-    fn simulate(&self, measured: [f64; 2], refined: [bool; 2]) -> [f64; 2] {
+    fn simulate(&self, measured: [f64; 2], refined: [bool; 2], rho: [f64; 2]) -> [f64; 2] {
         let [Some(r0), older] = self.commands else {
             return measured;
         };
@@ -271,7 +315,9 @@ impl OnlineTheta {
                 return measured[i];
             }
             let [a, b0, b1, c] = self.rls[i].theta();
-            a * self.sim[i] + b0 * r0[i] + b1 * r1[i] + c * [wh * wh, vh * wh][i]
+            let n = [wh * wh, vh * wh][i];
+            let d = self.rls[i].jitter_correction(rho, self.sim[i], [r0[i], r1[i]], n);
+            a * self.sim[i] + b0 * r0[i] + b1 * r1[i] + c * n + d
         })
     }
 
@@ -393,7 +439,7 @@ mod tests {
                 0.5 * (0.9 * t).sin() + 0.3 * (3.3 * t).sin(),
             ];
             let (mv, mw) = if average { (v_avg, w_avg) } else { (v, w) };
-            est.update(u[0], u[1], mv, mw);
+            est.update(t, u[0], u[1], mv, mw);
             (v_avg, w_avg) = (0.0, 0.0);
             for _ in 0..sub {
                 let dv = (THETA[2] * w * w - THETA[3] * v + u[0]) / THETA[0];

@@ -50,7 +50,9 @@ fn an_update_allocates_nothing() {
         for k in 0..100_000 {
             let t = k as f64 * 0.02;
             let (u, w) = ((0.7 * t).sin(), (1.9 * t).cos());
-            let change = est.update(u, w, 0.9 * u, 0.8 * w);
+            // Stamps jittered by up to 10 % of the period (the jitter correction's path).
+            let stamp = t + 0.002 * (1.7 * k as f64).sin();
+            let change = est.update(stamp, u, w, 0.9 * u, 0.8 * w);
             sum += est.theta()[0] + est.std_err()[1] + f64::from(u8::from(change.change[0]));
         }
         after = ALLOCATIONS.load(Ordering::SeqCst);

@@ -17,6 +17,24 @@
 //! has three parameters (a, s, c), s = β0 + β1 = K (1 − a), on the regressor
 //! [y_k, w0(â) u_k + w1(â) u_{k−1}, n̄_k] with w0 + w1 = 1 — the weights taken at the current
 //! estimate â (a pseudo-linear regression; the regressor's scale does not move with â).
+//!
+//! **Jitter.** A host samples at instants s_k that are not exactly T apart. Over the held
+//! command's period T_k = s_{k+1} − s_k the response keeps a_k = a^{ρ_k}, ρ_k = T_k/T, and
+//! window averages over the periods T_k and T_{k−1} give, with γ(x, ρ) = (1 − x)/(−ρ ln a),
+//! γ_k = γ(a_k, ρ_k):
+//!
+//! ```text
+//! instants (a):          y_{k+1} = a_k y_k + K (1 − a_k) u_k + c (1 − a_k)/(1 − a) n̄_k
+//! window averages (b):   y_{k+1} = A_k y_k + K (1 − γ_k) u_k + K (γ_k − A_k) u_{k−1}
+//!                                  + c (1 − A_k)/(1 − a) n̄_k,     A_k = γ_k a_{k−1}/γ_{k−1}
+//! ```
+//!
+//! (the free split takes the instants' form with both coefficients). Each channel still
+//! regresses on the nominal-period row; the difference d_k between the two right-hand sides,
+//! taken at the current estimate from the measured signals ([`ChannelRls::jitter_correction`]),
+//! passes through the same prefilter (linear and time-invariant in k, it leaves the equation as
+//! it is) and comes off the target: a pseudo-linear regression whose fixed point is the
+//! robot's θ at any stamping, and which reduces to the nominal one where ρ_k = 1.
 
 use wheelid_core::{Result, Timing};
 use wheelid_solvers::recursive::{Rls, RlsSettings, RlsUpdate};
@@ -77,6 +95,9 @@ pub(super) struct ChannelRls {
     theta: [f64; 4],
     /// (w0, w1) at â where it is a share (0 < â < 1), else at [`A_START`].
     weights: [f64; 2],
+    /// The split the stamping fixes (the jitter correction's form; `Free` for the free
+    /// four-parameter regression).
+    split: Split,
 }
 
 #[derive(Debug, Clone)]
@@ -97,6 +118,7 @@ impl ChannelRls {
             form,
             theta: [0.0; 4],
             weights: [1.0, 0.0],
+            split,
         };
         c.refresh();
         Ok(c)
@@ -180,6 +202,38 @@ impl ChannelRls {
                 })
             }
         }
+    }
+
+    /// d_k: what the sampled equation at the periods the samples actually spanned adds to
+    /// the one at the nominal period T, at the current estimate (module docs, "Jitter"):
+    /// `rho` = (T_k/T, T_{k−1}/T), `y` = y_k, `u` = (u_k, u_{k−1}), `n` = n̄_k, all as
+    /// measured (unfiltered). Zero where â is not a share (0 < â < 1) or the periods are
+    /// nominal.
+    pub(super) fn jitter_correction(&self, rho: [f64; 2], y: f64, u: [f64; 2], n: f64) -> f64 {
+        let [a, b0, b1, c] = self.theta;
+        if !(a > 0.0 && a < 1.0) || rho.iter().all(|r| (r - 1.0).abs() < 1e-9) {
+            return 0.0;
+        }
+        let ln = a.ln();
+        let a_k = (rho[0] * ln).exp();
+        let nominal = a * y + b0 * u[0] + b1 * u[1] + c * n;
+        let jittered = match self.split {
+            Split::Free | Split::Instant => {
+                let scale = (1.0 - a_k) / (1.0 - a);
+                a_k * y + scale * (b0 * u[0] + b1 * u[1] + c * n)
+            }
+            Split::WindowAverage => {
+                let a_prev = (rho[1] * ln).exp();
+                let gamma = |x: f64, r: f64| (1.0 - x) / (-r * ln);
+                let (g_k, g_prev) = (gamma(a_k, rho[0]), gamma(a_prev, rho[1]));
+                let big_a = g_k * a_prev / g_prev;
+                let gain = (b0 + b1) / (1.0 - a);
+                big_a * y
+                    + gain * ((1.0 - g_k) * u[0] + (g_k - big_a) * u[1])
+                    + c * (1.0 - big_a) / (1.0 - a) * n
+            }
+        };
+        jittered - nominal
     }
 
     /// Alarms raised so far.

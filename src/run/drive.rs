@@ -140,7 +140,7 @@ pub fn drive_online(
                 observer.progress("driving", k as u64 + 1, planned);
                 continue;
             };
-            let u = on.estimator.update(v_ref, w_ref, o.v, o.w);
+            let u = on.estimator.update(o.t, v_ref, w_ref, o.v, o.w);
             let th = on.estimator.theta();
             let trace = &mut on.trace;
             trace.t.push(o.t);
