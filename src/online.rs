@@ -47,7 +47,9 @@
 use wheelid_core::{Error, Result};
 use wheelid_solvers::recursive::{ChangeDetection, RlsSettings};
 
+mod flow;
 mod split;
+use flow::Flow;
 use split::ChannelRls;
 pub use split::Split;
 
@@ -94,6 +96,9 @@ pub enum OnlineForm {
     LeastSquares,
     /// Recursive instrumental variables with an auxiliary model's outputs as instruments.
     InstrumentalVariables,
+    /// The recursive prediction-error form of the output-error fit: the auxiliary model's
+    /// simulated outputs against the measured ones, unfiltered (module docs, "Output error").
+    OutputError,
 }
 
 impl Default for OnlineSettings {
@@ -149,6 +154,10 @@ pub struct OnlineTheta {
     times: [Option<f64>; 2],
     /// The last sample as measured: (v, ω, ω², v ω).
     measured: [f64; 4],
+    /// The split the stamping fixes (free where unknown).
+    split: Split,
+    /// The output-error form's simulated robot, while both channels run in it.
+    flow: Option<Flow>,
 }
 
 impl OnlineTheta {
@@ -206,6 +215,8 @@ impl OnlineTheta {
             warmup: ((settings.warmup_s.max(0.0) / dt_s).ceil() as u64).max(1),
             times: [None; 2],
             measured: [0.0; 4],
+            split: settings.split.unwrap_or_default(),
+            flow: None,
         })
     }
 
@@ -223,7 +234,11 @@ impl OnlineTheta {
         let raw = [v_ref, w_ref, v, w, w * w, v * w];
         let refined = [self.refined(0), self.refined(1)];
         let corrections = self.jitter_corrections(rho, [w * w, v * w]);
-        self.sim = self.simulate([v, w], refined, rho);
+        let before = self.sim;
+        self.sim = match self.flow_step(refined, rho) {
+            Some(sim) => sim,
+            None => self.simulate([v, w], refined, rho),
+        };
         let [vh, wh] = self.sim;
         let p = self.pole;
         let mut now = [0.0; SIGNALS];
@@ -236,6 +251,8 @@ impl OnlineTheta {
             s[1] = p * s[1] + (1.0 - p) * s[0];
             *f = s[1];
         }
+        // (u_k, u_{k−1}) of the step to this sample.
+        let held = self.commands.map(|c| c.unwrap_or([0.0; 2]));
         self.commands = [Some([v_ref, w_ref]), self.commands[0]];
         self.times = [Some(t), self.times[0]];
         self.measured = [v, w, w * w, v * w];
@@ -249,11 +266,22 @@ impl OnlineTheta {
         let change: [bool; 2] = std::array::from_fn(|i| {
             let row = [q[2 + i], q[i], o[i], 0.5 * (q[4 + i] + now[4 + i])];
             let target = now[2 + i] - now[10 + i];
-            let step = if refined[i] {
-                let zeta = [q[6 + i], q[i], o[i], 0.5 * (q[8 + i] + now[8 + i])];
-                self.rls[i].update_iv(&row, &zeta, target)
-            } else {
-                self.rls[i].update(&row, target)
+            let step = match (refined[i], self.form) {
+                (false, _) | (_, OnlineForm::LeastSquares) => self.rls[i].update(&row, target),
+                (true, OnlineForm::InstrumentalVariables) => {
+                    let zeta = [q[6 + i], q[i], o[i], 0.5 * (q[8 + i] + now[8 + i])];
+                    self.rls[i].update_iv(&row, &zeta, target)
+                }
+                (true, OnlineForm::OutputError) => {
+                    let [v1, w1] = self.sim;
+                    let n = [
+                        0.5 * (before[1] * before[1] + w1 * w1),
+                        0.5 * (before[0] * before[1] + v1 * w1),
+                    ][i];
+                    let u = [held[0][i], held[1][i]];
+                    let error = [v, w][i] - self.sim[i];
+                    self.rls[i].update_output_error([before[i], n], u, error, &row, target)
+                }
             };
             self.since_reset[i] = if step.change {
                 0
@@ -263,6 +291,23 @@ impl OnlineTheta {
             step.change
         });
         OnlineUpdate { change }
+    }
+
+    /// The output-error form's simulated outputs at this sample ([`Flow`]), where both channels
+    /// run in that form, the stamping fixes the split and θ̂ maps; `None` (and the flow
+    /// stopped) otherwise.
+    fn flow_step(&mut self, refined: [bool; 2], rho: [f64; 2]) -> Option<[f64; 2]> {
+        let theta = self.theta();
+        let runs = self.form == OnlineForm::OutputError
+            && refined == [true, true]
+            && self.split != Split::Free
+            && theta.iter().all(|x| x.is_finite());
+        let (true, [Some(u), _]) = (runs, self.commands) else {
+            self.flow = None;
+            return None;
+        };
+        let flow = self.flow.get_or_insert(Flow::start(self.sim));
+        Some(flow.advance(&theta, u, rho[0] * self.dt, self.split))
     }
 
     /// (T_k/T, T_{k−1}/T): the periods from the last sample to the one stamped `t` and the one
@@ -310,15 +355,28 @@ impl OnlineTheta {
         };
         let r1 = older.unwrap_or(r0);
         let [vh, wh] = self.sim;
-        std::array::from_fn(|i| {
-            if !refined[i] {
-                return measured[i];
-            }
-            let [a, b0, b1, c] = self.rls[i].theta();
-            let n = [wh * wh, vh * wh][i];
-            let d = self.rls[i].jitter_correction(rho, self.sim[i], [r0[i], r1[i]], n);
-            a * self.sim[i] + b0 * r0[i] + b1 * r1[i] + c * n + d
-        })
+        let held = [wh * wh, vh * wh];
+        // y_{k+1} = p + q n̄_k per channel, n̄_k the coupling's trapezoidal mean over the step
+        // (as in the regression): solved by fixed-point steps from the held coupling (each
+        // contracts by about q n/2, a fraction of a per cent).
+        let steps: [(f64, f64); 2] = std::array::from_fn(|i| {
+            self.rls[i].step(rho, self.sim[i], [r0[i], r1[i]])
+        });
+        let advance = |n: [f64; 2]| -> [f64; 2] {
+            std::array::from_fn(|i| {
+                if refined[i] {
+                    steps[i].0 + steps[i].1 * n[i]
+                } else {
+                    measured[i]
+                }
+            })
+        };
+        let mut next = advance(held);
+        for _ in 0..3 {
+            let [v1, w1] = next;
+            next = advance([0.5 * (held[0] + w1 * w1), 0.5 * (held[1] + v1 * w1)]);
+        }
+        next
     }
 
     /// θ̂1…θ̂6 (the units of `wheelid_models::regressor::PARAMS`; NaN while a channel's

@@ -116,8 +116,14 @@ fn z_from_batch(p: &PhysicalProfile, rec: &Recording) -> [f64; 4] {
         &IdentifySettings::default(),
     )
     .expect("identifies");
-    let (est, _) = online(rec, OnlineSettings::default());
+    let form = match std::env::var("XFORM").as_deref() {
+        Ok("oe") => wheelid::online::OnlineForm::OutputError,
+        Ok("ls") => wheelid::online::OnlineForm::LeastSquares,
+        _ => wheelid::online::OnlineForm::InstrumentalVariables,
+    };
+    let (est, _) = online(rec, OnlineSettings { form, ..OnlineSettings::default() });
     let (th, se) = (est.theta(), est.std_err());
+    eprintln!("  alarms {:?}, θ {:+.3?} % of batch", est.changes(), [0, 1, 3, 5].map(|i| pct(th[i], batch.theta[i])));
     [0, 1, 3, 5].map(|i| (th[i] - batch.theta[i]) / se[i])
 }
 

@@ -107,6 +107,16 @@ pub struct RlsUpdate {
     pub change: bool,
 }
 
+/// aᵀ b.
+fn dot<const N: usize>(a: &[f64; N], b: &[f64; N]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+/// aᵀ P b.
+fn quadratic<const N: usize>(a: &[f64; N], p: &[[f64; N]; N], b: &[f64; N]) -> f64 {
+    a.iter().zip(p).map(|(x, row)| x * dot(row, b)).sum()
+}
+
 /// A recursive least-squares estimator of N parameters (module docs).
 #[derive(Debug, Clone)]
 pub struct Rls<const N: usize> {
@@ -247,7 +257,7 @@ impl<const N: usize> Rls<N> {
     /// Takes one sample: regressor `phi` (N) and measurement `y`. A non-finite sample is
     /// skipped (returned with a NaN error).
     pub fn update(&mut self, phi: &[f64; N], y: f64) -> RlsUpdate {
-        self.step(phi, None, y)
+        self.step(phi, None, y, None)
     }
 
     /// Takes one sample by recursive instrumental variables (Ljung 1999 eq. 11.51; Young's
@@ -269,11 +279,67 @@ impl<const N: usize> Rls<N> {
                 change: false,
             };
         }
-        self.step(phi, Some(zeta), y)
+        self.step(phi, Some(zeta), y, None)
     }
 
-    /// One step of [`Rls::update`] (`zeta` none: P stays symmetric) or [`Rls::update_iv`].
-    fn step(&mut self, phi: &[f64; N], zeta: Option<&[f64; N]>, y: f64) -> RlsUpdate {
+    /// Takes one sample by a recursive prediction-error method (Ljung 1999 §11.3, Gauss–Newton
+    /// direction; Ljung & Söderström 1983, *Theory and Practice of Recursive Identification*):
+    /// the model's prediction error `error` = y_k − ŷ_k(θ̂) and its gradient `psi` = ∂ŷ_k/∂θ at
+    /// θ̂ (N), e.g. an output-error model's simulated output and its sensitivities:
+    ///
+    /// ```text
+    /// s_k = λ + ψ_kᵀ P_{k−1} ψ_k,  θ̂_k = θ̂_{k−1} + P_{k−1} ψ_k ε_k / s_k,
+    /// P_k = (P_{k−1} − P_{k−1} ψ_k ψ_kᵀ P_{k−1} / s_k) / λ
+    /// ```
+    ///
+    /// The intervals take h_k = ψ_k ε_k. An output error is coloured by the model's own
+    /// dynamics, so the change detector reads instead the one-step prediction error of the
+    /// linear regression `detect` = (φ_k, y_k) at the same θ̂ (near white while θ holds),
+    /// normalised by λ + φ_kᵀ P_{k−1} φ_k. A non-finite sample is skipped.
+    pub fn update_gradient(
+        &mut self,
+        psi: &[f64; N],
+        error: f64,
+        detect: (&[f64; N], f64),
+    ) -> RlsUpdate {
+        let (phi, y) = detect;
+        if !error.is_finite() || !y.is_finite() || phi.iter().any(|x| !x.is_finite()) {
+            return RlsUpdate {
+                error: f64::NAN,
+                change: false,
+            };
+        }
+        let innovation = y - dot(phi, &self.theta);
+        let lambda = self.lambda();
+        let s = lambda + quadratic(phi, &self.p, phi);
+        let target = error + dot(psi, &self.theta);
+        let step = self.step(psi, None, target, Some(innovation * innovation * lambda / s));
+        RlsUpdate {
+            error: innovation,
+            ..step
+        }
+    }
+
+    /// The step's forgetting factor: λ, or 1 while trace P is above its start (windup guard).
+    fn lambda(&self) -> f64 {
+        let trace: f64 = (0..N).map(|i| self.p[i][i]).sum();
+        if trace > self.trace0 {
+            1.0
+        } else {
+            self.settings.forgetting
+        }
+    }
+
+    /// One step of [`Rls::update`] (`zeta` none: P stays symmetric), [`Rls::update_iv`] or
+    /// [`Rls::update_gradient`] (`detect`: the change detector's normalised squared
+    /// innovation, where it is not this step's own).
+    fn step(
+        &mut self,
+        phi: &[f64; N],
+        zeta: Option<&[f64; N]>,
+        y: f64,
+        detect: Option<f64>,
+    ) -> RlsUpdate {
         if !y.is_finite() || phi.iter().any(|x| !x.is_finite()) {
             return RlsUpdate {
                 error: f64::NAN,
@@ -290,13 +356,8 @@ impl<const N: usize> Rls<N> {
             None => pz,
             Some(_) => std::array::from_fn(|j| (0..N).map(|i| phi[i] * self.p[i][j]).sum()),
         };
-        let trace: f64 = (0..N).map(|i| self.p[i][i]).sum();
         // Windup guard: no forgetting while P is above its start size.
-        let lambda = if trace > self.trace0 {
-            1.0
-        } else {
-            self.settings.forgetting
-        };
+        let lambda = self.lambda();
         let s = lambda + phi.iter().zip(&pz).map(|(a, b)| a * b).sum::<f64>();
         let error = y - phi.iter().zip(&self.theta).map(|(a, b)| a * b).sum::<f64>();
         for (t, k) in self.theta.iter_mut().zip(&pz) {
@@ -323,7 +384,7 @@ impl<const N: usize> Rls<N> {
         let after = error * lambda / s;
         self.hac
             .push(&std::array::from_fn(|i| z[i] * after), lambda);
-        let normalised = error * error * lambda / s;
+        let normalised = detect.unwrap_or(error * error * lambda / s);
         let change = self.detect(normalised);
         RlsUpdate { error, change }
     }

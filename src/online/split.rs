@@ -98,6 +98,10 @@ pub(super) struct ChannelRls {
     /// The split the stamping fixes (the jitter correction's form; `Free` for the free
     /// four-parameter regression).
     split: Split,
+    /// ψ = ∂ŷ/∂(a, β0, β1, c) (free) or ∂ŷ/∂(a, s, c) (fixed, first three) of the output-error
+    /// form's simulated output at the last sample; zero where the last update was not in that
+    /// form.
+    psi: [f64; 4],
 }
 
 #[derive(Debug, Clone)]
@@ -119,6 +123,7 @@ impl ChannelRls {
             theta: [0.0; 4],
             weights: [1.0, 0.0],
             split,
+            psi: [0.0; 4],
         };
         c.refresh();
         Ok(c)
@@ -149,6 +154,7 @@ impl ChannelRls {
 
     /// Least-squares update on `row` = [y_k, u_k, u_{k−1}, n̄_k] toward `y` = y_{k+1}.
     pub(super) fn update(&mut self, row: &[f64; 4], y: f64) -> RlsUpdate {
+        self.psi = [0.0; 4];
         let step = match &mut self.form {
             Form::Free(r) => r.update(row, y),
             Form::Fixed(r, _) => r.update(&Self::reduce(self.weights, row), y),
@@ -160,10 +166,51 @@ impl ChannelRls {
     /// Instrumental-variables update ([`Rls::update_iv`]) with instruments `zeta` (a row of
     /// the same form).
     pub(super) fn update_iv(&mut self, row: &[f64; 4], zeta: &[f64; 4], y: f64) -> RlsUpdate {
+        self.psi = [0.0; 4];
         let w = self.weights;
         let step = match &mut self.form {
             Form::Free(r) => r.update_iv(row, zeta, y),
             Form::Fixed(r, _) => r.update_iv(&Self::reduce(w, row), &Self::reduce(w, zeta), y),
+        };
+        self.refresh();
+        step
+    }
+
+    /// Output-error update (module docs of [`super`], "Output error"): the simulated output's
+    /// step from `sim` = (ŷ_k, n̂_k) under `u` = (u_k, u_{k−1}) gives its gradient ψ_{k+1} =
+    /// â ψ_k + ∂(step)/∂θ (the coupling n̂ taken as given), and a Gauss–Newton step on
+    /// `error` = y_{k+1} − ŷ_{k+1} ([`Rls::update_gradient`]); the change detector reads the
+    /// prefiltered equation's one-step error on `row` toward `y`.
+    pub(super) fn update_output_error(
+        &mut self,
+        sim: [f64; 2],
+        u: [f64; 2],
+        error: f64,
+        row: &[f64; 4],
+        y: f64,
+    ) -> RlsUpdate {
+        let [a, b0, b1, _] = self.theta;
+        let [y_hat, n] = sim;
+        let step = match &mut self.form {
+            Form::Free(r) => {
+                let g = [y_hat, u[0], u[1], n];
+                self.psi = std::array::from_fn(|i| a * self.psi[i] + g[i]);
+                r.update_gradient(&self.psi, error, (row, y))
+            }
+            Form::Fixed(r, split) => {
+                let (w, dw) = shares(*split, a);
+                let s = b0 + b1;
+                let g = [
+                    y_hat + s * (dw[0] * u[0] + dw[1] * u[1]),
+                    w[0] * u[0] + w[1] * u[1],
+                    n,
+                ];
+                for i in 0..3 {
+                    self.psi[i] = a * self.psi[i] + g[i];
+                }
+                let psi = [self.psi[0], self.psi[1], self.psi[2]];
+                r.update_gradient(&psi, error, (&Self::reduce(self.weights, row), y))
+            }
         };
         self.refresh();
         step
@@ -211,16 +258,25 @@ impl ChannelRls {
     /// nominal.
     pub(super) fn jitter_correction(&self, rho: [f64; 2], y: f64, u: [f64; 2], n: f64) -> f64 {
         let [a, b0, b1, c] = self.theta;
+        let (offset, coupling) = self.step(rho, y, u);
+        offset + coupling * n - (a * y + b0 * u[0] + b1 * u[1] + c * n)
+    }
+
+    /// The sampled equation's step at the current estimate over the periods `rho` = (T_k/T,
+    /// T_{k−1}/T) from y_k = `y` under `u` = (u_k, u_{k−1}), as (p, q): y_{k+1} = p + q n̄_k
+    /// (module docs, "Jitter"; the nominal equation where â is not a share or the periods are
+    /// nominal).
+    pub(super) fn step(&self, rho: [f64; 2], y: f64, u: [f64; 2]) -> (f64, f64) {
+        let [a, b0, b1, c] = self.theta;
         if !(a > 0.0 && a < 1.0) || rho.iter().all(|r| (r - 1.0).abs() < 1e-9) {
-            return 0.0;
+            return (a * y + b0 * u[0] + b1 * u[1], c);
         }
         let ln = a.ln();
         let a_k = (rho[0] * ln).exp();
-        let nominal = a * y + b0 * u[0] + b1 * u[1] + c * n;
-        let jittered = match self.split {
+        match self.split {
             Split::Free | Split::Instant => {
                 let scale = (1.0 - a_k) / (1.0 - a);
-                a_k * y + scale * (b0 * u[0] + b1 * u[1] + c * n)
+                (a_k * y + scale * (b0 * u[0] + b1 * u[1]), scale * c)
             }
             Split::WindowAverage => {
                 let a_prev = (rho[1] * ln).exp();
@@ -228,12 +284,12 @@ impl ChannelRls {
                 let (g_k, g_prev) = (gamma(a_k, rho[0]), gamma(a_prev, rho[1]));
                 let big_a = g_k * a_prev / g_prev;
                 let gain = (b0 + b1) / (1.0 - a);
-                big_a * y
-                    + gain * ((1.0 - g_k) * u[0] + (g_k - big_a) * u[1])
-                    + c * (1.0 - big_a) / (1.0 - a) * n
+                (
+                    big_a * y + gain * ((1.0 - g_k) * u[0] + (g_k - big_a) * u[1]),
+                    c * (1.0 - big_a) / (1.0 - a),
+                )
             }
-        };
-        jittered - nominal
+        }
     }
 
     /// Alarms raised so far.
