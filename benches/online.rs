@@ -1,6 +1,9 @@
 //! Criterion benchmark of the online estimator (issue 18, `wheelid::online`): one update per
-//! sample — the prefilter, two 4-parameter RLS steps with change detection; with the split
-//! fixed, two 3-parameter ones — and the same with θ̂ and its standard errors read after
+//! sample — the prefilter, two 4-parameter RLS steps with change detection (the split free:
+//! instruments after the warm-up); with the split fixed, two 3-parameter ones, by
+//! instruments or (the default) the output-error form with its RK4 simulation, and the
+//! latter with the stamps jittered by ± 10 % of the period (the jitter correction's
+//! exponentials) — and the same with θ̂ and its standard errors read after
 //! every sample, over a 10-minute 50 Hz recording of the
 //! simulated Khepera III (30,001 samples). Criterion reports the time per recording; per
 //! sample it is that over 30,001 (goal ≤ 200 ns).
@@ -8,7 +11,7 @@
 //! Run: `cargo bench --bench online`.
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
-use wheelid::online::{OnlineSettings, OnlineTheta, Split};
+use wheelid::online::{OnlineForm, OnlineSettings, OnlineTheta, Split};
 use wheelid::robots::{Excitation, RobotProfile, SimSettings, simulate_recording};
 
 fn bench(c: &mut Criterion) {
@@ -39,20 +42,33 @@ fn bench(c: &mut Criterion) {
         })
     });
     // With the split of u_k and u_{k−1} fixed by the stamping (as `wheelid run` sets it):
-    // three-parameter regressions, one logarithm a channel per update.
+    // three-parameter regressions; the output-error form (the default) or instruments.
     let fixed = OnlineSettings {
         split: Some(Split::WindowAverage),
         ..OnlineSettings::default()
     };
-    g.bench_function("update per recording, split fixed", |b| {
-        b.iter(|| {
-            let mut est = OnlineTheta::new(fixed, dt).expect("settings");
-            for k in 0..rec.len() {
-                est.update(rec.t[k], rec.v_ref[k], rec.w_ref[k], rec.v[k], rec.w[k]);
-            }
-            est.theta()
-        })
-    });
+    let instruments = OnlineSettings {
+        form: OnlineForm::InstrumentalVariables,
+        ..fixed
+    };
+    let jittered: Vec<f64> = (0..rec.len())
+        .map(|k| rec.t[k] + 0.1 * dt * (1.7 * k as f64).sin())
+        .collect();
+    for (name, settings, t) in [
+        ("update per recording, split fixed", fixed, &rec.t),
+        ("update per recording, split fixed, instruments", instruments, &rec.t),
+        ("update per recording, split fixed, stamps jittered", fixed, &jittered),
+    ] {
+        g.bench_function(name, |b| {
+            b.iter(|| {
+                let mut est = OnlineTheta::new(settings, dt).expect("settings");
+                for k in 0..rec.len() {
+                    est.update(t[k], rec.v_ref[k], rec.w_ref[k], rec.v[k], rec.w[k]);
+                }
+                est.theta()
+            })
+        });
+    }
     g.bench_function("update and read per recording", |b| {
         b.iter(|| {
             let mut est = OnlineTheta::new(OnlineSettings::default(), dt).expect("settings");

@@ -109,14 +109,14 @@ impl Default for OnlineSettings {
             initial_variance: 1e4,
             detection: Some(ChangeDetection::default()),
             warmup_s: 10.0,
-            form: OnlineForm::InstrumentalVariables,
+            form: OnlineForm::OutputError,
             split: None,
         }
     }
 }
 
-/// The filtered signals: u and y of each channel, n (ω², v ω), the auxiliary model's v̂,
-/// ω̂, ω̂², v̂ ω̂, and each channel's jitter correction d (module `split`).
+/// The filtered signals: u and y of each channel, n (ω², v ω), each channel's jitter
+/// correction d (module `split`), and the auxiliary model's v̂, ω̂, ω̂², v̂ ω̂ (instruments).
 const SIGNALS: usize = 12;
 
 /// What one update did.
@@ -235,18 +235,24 @@ impl OnlineTheta {
         let refined = [self.refined(0), self.refined(1)];
         let corrections = self.jitter_corrections(rho, [w * w, v * w]);
         let before = self.sim;
-        self.sim = match self.flow_step(refined, rho) {
-            Some(sim) => sim,
-            None => self.simulate([v, w], refined, rho),
+        self.sim = match (self.flow_step(refined, rho), self.form) {
+            (Some(sim), _) => sim,
+            (None, OnlineForm::InstrumentalVariables) => self.simulate([v, w], refined, rho),
+            (None, _) => [v, w],
         };
         let [vh, wh] = self.sim;
         let p = self.pole;
         let mut now = [0.0; SIGNALS];
         let signals = raw
             .into_iter()
-            .chain([vh, wh, wh * wh, vh * wh])
-            .chain(corrections);
-        for ((s, x), f) in self.state.iter_mut().zip(signals).zip(&mut now) {
+            .chain(corrections)
+            .chain([vh, wh, wh * wh, vh * wh]);
+        // The auxiliary model's signals are the instruments alone.
+        let used = match self.form {
+            OnlineForm::InstrumentalVariables => SIGNALS,
+            _ => SIGNALS - 4,
+        };
+        for ((s, x), f) in self.state[..used].iter_mut().zip(signals).zip(&mut now) {
             s[0] = p * s[0] + (1.0 - p) * x;
             s[1] = p * s[1] + (1.0 - p) * s[0];
             *f = s[1];
@@ -265,11 +271,11 @@ impl OnlineTheta {
         // auxiliary model's v̂_k (ω̂_k) and n̄_k.
         let change: [bool; 2] = std::array::from_fn(|i| {
             let row = [q[2 + i], q[i], o[i], 0.5 * (q[4 + i] + now[4 + i])];
-            let target = now[2 + i] - now[10 + i];
+            let target = now[2 + i] - now[6 + i];
             let step = match (refined[i], self.form) {
                 (false, _) | (_, OnlineForm::LeastSquares) => self.rls[i].update(&row, target),
                 (true, OnlineForm::InstrumentalVariables) => {
-                    let zeta = [q[6 + i], q[i], o[i], 0.5 * (q[8 + i] + now[8 + i])];
+                    let zeta = [q[8 + i], q[i], o[i], 0.5 * (q[10 + i] + now[10 + i])];
                     self.rls[i].update_iv(&row, &zeta, target)
                 }
                 (true, OnlineForm::OutputError) => {
@@ -278,9 +284,13 @@ impl OnlineTheta {
                         0.5 * (before[1] * before[1] + w1 * w1),
                         0.5 * (before[0] * before[1] + v1 * w1),
                     ][i];
-                    let u = [held[0][i], held[1][i]];
-                    let error = [v, w][i] - self.sim[i];
-                    self.rls[i].update_output_error([before[i], n], u, error, &row, target)
+                    self.rls[i].advance_gradient([before[i], n], [held[0][i], held[1][i]]);
+                    if self.flow.as_ref().is_some_and(Flow::settled) {
+                        let error = [v, w][i] - self.sim[i];
+                        self.rls[i].update_output_error(error, &row, target)
+                    } else {
+                        self.rls[i].update(&row, target)
+                    }
                 }
             };
             self.since_reset[i] = if step.change {
@@ -297,17 +307,20 @@ impl OnlineTheta {
     /// run in that form, the stamping fixes the split and θ̂ maps; `None` (and the flow
     /// stopped) otherwise.
     fn flow_step(&mut self, refined: [bool; 2], rho: [f64; 2]) -> Option<[f64; 2]> {
-        let theta = self.theta();
         let runs = self.form == OnlineForm::OutputError
             && refined == [true, true]
-            && self.split != Split::Free
-            && theta.iter().all(|x| x.is_finite());
-        let (true, [Some(u), _]) = (runs, self.commands) else {
+            && self.split != Split::Free;
+        let theta = if runs { self.theta() } else { [f64::NAN; 6] };
+        let (true, [Some(u), _]) = (theta.iter().all(|x| x.is_finite()), self.commands) else {
             self.flow = None;
             return None;
         };
-        let flow = self.flow.get_or_insert(Flow::start(self.sim));
-        Some(flow.advance(&theta, u, rho[0] * self.dt, self.split))
+        if self.flow.is_none() {
+            self.rls.iter_mut().for_each(ChannelRls::reset_gradient);
+        }
+        let (sim, dt) = (self.sim, self.dt);
+        let flow = self.flow.get_or_insert_with(|| Flow::start(sim, &theta, dt));
+        Some(flow.advance(&theta, u, rho[0] * dt, self.split))
     }
 
     /// (T_k/T, T_{k−1}/T): the periods from the last sample to the one stamped `t` and the one
@@ -408,7 +421,7 @@ impl OnlineTheta {
             return [f64::NAN; 3];
         };
         let gain = (1.0 - a) / s;
-        [-gain * self.dt / a.ln(), sign * c / s, gain]
+        [-gain * self.dt / self.rls[i].ln_a(), sign * c / s, gain]
     }
 
     /// Standard errors of [`OnlineTheta::channel`] by the delta method.
@@ -416,7 +429,7 @@ impl OnlineTheta {
         let Some((a, s, c, sign)) = self.difference_equation(i) else {
             return [f64::NAN; 3];
         };
-        let (t, ln) = (self.dt, a.ln());
+        let (t, ln) = (self.dt, self.rls[i].ln_a());
         let gain = (1.0 - a) / s;
         let coupling = sign * c / s;
         // Jacobians by (a, β0, β1, c); β0 and β1 enter through their sum alone.

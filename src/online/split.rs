@@ -70,12 +70,11 @@ impl Split {
 const A_START: f64 = 0.5;
 
 /// The weights (w0, w1) of u_k and u_{k−1} (w0 + w1 = 1: β0 = s w0(a), β1 = s w1(a), s =
-/// β0 + β1 = K (1 − a)), and their derivatives by a.
-fn shares(split: Split, a: f64) -> ([f64; 2], [f64; 2]) {
+/// β0 + β1 = K (1 − a)), and their derivatives by a; `ln` = ln a.
+fn shares(split: Split, a: f64, ln: f64) -> ([f64; 2], [f64; 2]) {
     match split {
         Split::Instant | Split::Free => ([1.0, 0.0], [0.0, 0.0]),
         Split::WindowAverage => {
-            let ln = a.ln();
             let gamma = (1.0 - a) / -ln;
             let d_gamma = (ln + (1.0 - a) / a) / (ln * ln);
             let w0 = (1.0 - gamma) / (1.0 - a);
@@ -93,8 +92,12 @@ pub(super) struct ChannelRls {
     form: Form,
     /// (a, β0, β1, c) at the estimate.
     theta: [f64; 4],
-    /// (w0, w1) at â where it is a share (0 < â < 1), else at [`A_START`].
+    /// (w0, w1) at â where it is a share (0 < â < 1), else at [`A_START`], and their
+    /// derivatives by a there.
     weights: [f64; 2],
+    d_weights: [f64; 2],
+    /// ln â with the split fixed (NaN where â ≤ 0; free: not kept, NaN).
+    ln_a: f64,
     /// The split the stamping fixes (the jitter correction's form; `Free` for the free
     /// four-parameter regression).
     split: Split,
@@ -122,6 +125,8 @@ impl ChannelRls {
             form,
             theta: [0.0; 4],
             weights: [1.0, 0.0],
+            d_weights: [0.0; 2],
+            ln_a: f64::NAN,
             split,
             psi: [0.0; 4],
         };
@@ -135,12 +140,13 @@ impl ChannelRls {
             Form::Free(r) => self.theta = r.theta(),
             Form::Fixed(r, s) => {
                 let [a, sum, c] = r.theta();
-                let (w, _) = shares(*s, a);
+                self.ln_a = a.ln();
+                let (w, dw) = shares(*s, a, self.ln_a);
                 self.theta = [a, sum * w[0], sum * w[1], c];
-                self.weights = if a > 0.0 && a < 1.0 {
-                    w
+                (self.weights, self.d_weights) = if a > 0.0 && a < 1.0 {
+                    (w, dw)
                 } else {
-                    shares(*s, A_START).0
+                    shares(*s, A_START, A_START.ln())
                 };
             }
         }
@@ -154,7 +160,6 @@ impl ChannelRls {
 
     /// Least-squares update on `row` = [y_k, u_k, u_{k−1}, n̄_k] toward `y` = y_{k+1}.
     pub(super) fn update(&mut self, row: &[f64; 4], y: f64) -> RlsUpdate {
-        self.psi = [0.0; 4];
         let step = match &mut self.form {
             Form::Free(r) => r.update(row, y),
             Form::Fixed(r, _) => r.update(&Self::reduce(self.weights, row), y),
@@ -166,7 +171,6 @@ impl ChannelRls {
     /// Instrumental-variables update ([`Rls::update_iv`]) with instruments `zeta` (a row of
     /// the same form).
     pub(super) fn update_iv(&mut self, row: &[f64; 4], zeta: &[f64; 4], y: f64) -> RlsUpdate {
-        self.psi = [0.0; 4];
         let w = self.weights;
         let step = match &mut self.form {
             Form::Free(r) => r.update_iv(row, zeta, y),
@@ -176,44 +180,58 @@ impl ChannelRls {
         step
     }
 
-    /// Output-error update (module docs of [`super`], "Output error"): the simulated output's
-    /// step from `sim` = (ŷ_k, n̂_k) under `u` = (u_k, u_{k−1}) gives its gradient ψ_{k+1} =
-    /// â ψ_k + ∂(step)/∂θ (the coupling n̂ taken as given), and a Gauss–Newton step on
-    /// `error` = y_{k+1} − ŷ_{k+1} ([`Rls::update_gradient`]); the change detector reads the
-    /// prefiltered equation's one-step error on `row` toward `y`.
-    pub(super) fn update_output_error(
-        &mut self,
-        sim: [f64; 2],
-        u: [f64; 2],
-        error: f64,
-        row: &[f64; 4],
-        y: f64,
-    ) -> RlsUpdate {
+    /// Starts the output-error form's gradient ψ afresh (its simulation starts).
+    pub(super) fn reset_gradient(&mut self) {
+        self.psi = [0.0; 4];
+    }
+
+    /// Advances the output-error form's gradient over the simulated output's step from `sim`
+    /// = (ŷ_k, n̂̄_k) under `u` = (u_k, u_{k−1}): ψ_{k+1} = â ψ_k + ∂(step)/∂θ at the estimate,
+    /// by the sampled equation (the coupling n̂ taken as given; module docs of [`super`],
+    /// "Output error").
+    pub(super) fn advance_gradient(&mut self, sim: [f64; 2], u: [f64; 2]) {
         let [a, b0, b1, _] = self.theta;
         let [y_hat, n] = sim;
-        let step = match &mut self.form {
-            Form::Free(r) => {
-                let g = [y_hat, u[0], u[1], n];
-                self.psi = std::array::from_fn(|i| a * self.psi[i] + g[i]);
-                r.update_gradient(&self.psi, error, (row, y))
-            }
-            Form::Fixed(r, split) => {
-                let (w, dw) = shares(*split, a);
-                let s = b0 + b1;
-                let g = [
-                    y_hat + s * (dw[0] * u[0] + dw[1] * u[1]),
+        let g = match &self.form {
+            Form::Free(_) => [y_hat, u[0], u[1], n],
+            Form::Fixed(..) => {
+                let (w, dw) = (self.weights, self.d_weights);
+                [
+                    y_hat + (b0 + b1) * (dw[0] * u[0] + dw[1] * u[1]),
                     w[0] * u[0] + w[1] * u[1],
                     n,
-                ];
-                for i in 0..3 {
-                    self.psi[i] = a * self.psi[i] + g[i];
-                }
-                let psi = [self.psi[0], self.psi[1], self.psi[2]];
-                r.update_gradient(&psi, error, (&Self::reduce(self.weights, row), y))
+                    0.0,
+                ]
             }
+        };
+        for (p, g) in self.psi.iter_mut().zip(g) {
+            *p = a * *p + g;
+        }
+    }
+
+    /// Output-error update: a Gauss–Newton step on `error` = y_{k+1} − ŷ_{k+1} along the
+    /// gradient of [`ChannelRls::advance_gradient`] ([`Rls::update_gradient`]); the change
+    /// detector reads the prefiltered equation's one-step error on `row` toward `y`.
+    pub(super) fn update_output_error(&mut self, error: f64, row: &[f64; 4], y: f64) -> RlsUpdate {
+        let psi = self.psi;
+        let step = match &mut self.form {
+            Form::Free(r) => r.update_gradient(&psi, error, (row, y)),
+            Form::Fixed(r, _) => r.update_gradient(
+                &[psi[0], psi[1], psi[2]],
+                error,
+                (&Self::reduce(self.weights, row), y),
+            ),
         };
         self.refresh();
         step
+    }
+
+    /// ln â (kept from the last update where the split is fixed).
+    pub(super) fn ln_a(&self) -> f64 {
+        match self.form {
+            Form::Free(_) => self.theta[0].ln(),
+            Form::Fixed(..) => self.ln_a,
+        }
     }
 
     /// (a, β0, β1, c).
@@ -228,7 +246,7 @@ impl ChannelRls {
             Form::Free(r) => r.covariance(),
             Form::Fixed(r, s) => {
                 let [a, sum, _] = r.theta();
-                let ([w0, w1], [d0, d1]) = shares(*s, a);
+                let ([w0, w1], [d0, d1]) = shares(*s, a, self.ln_a);
                 let j = [
                     [1.0, 0.0, 0.0],
                     [sum * d0, w0, 0.0],
@@ -258,8 +276,18 @@ impl ChannelRls {
     /// nominal.
     pub(super) fn jitter_correction(&self, rho: [f64; 2], y: f64, u: [f64; 2], n: f64) -> f64 {
         let [a, b0, b1, c] = self.theta;
+        if self.nominal(rho) {
+            return 0.0;
+        }
         let (offset, coupling) = self.step(rho, y, u);
         offset + coupling * n - (a * y + b0 * u[0] + b1 * u[1] + c * n)
+    }
+
+    /// Whether the step over the periods `rho` is the nominal one: â not a share, or the
+    /// periods nominal.
+    fn nominal(&self, rho: [f64; 2]) -> bool {
+        let a = self.theta[0];
+        !(a > 0.0 && a < 1.0) || rho.iter().all(|r| (r - 1.0).abs() < 1e-9)
     }
 
     /// The sampled equation's step at the current estimate over the periods `rho` = (T_k/T,
@@ -268,10 +296,10 @@ impl ChannelRls {
     /// nominal).
     pub(super) fn step(&self, rho: [f64; 2], y: f64, u: [f64; 2]) -> (f64, f64) {
         let [a, b0, b1, c] = self.theta;
-        if !(a > 0.0 && a < 1.0) || rho.iter().all(|r| (r - 1.0).abs() < 1e-9) {
+        if self.nominal(rho) {
             return (a * y + b0 * u[0] + b1 * u[1], c);
         }
-        let ln = a.ln();
+        let ln = self.ln_a();
         let a_k = (rho[0] * ln).exp();
         match self.split {
             Split::Free | Split::Instant => {
