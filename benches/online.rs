@@ -56,8 +56,16 @@ fn bench(c: &mut Criterion) {
         .collect();
     for (name, settings, t) in [
         ("update per recording, split fixed", fixed, &rec.t),
-        ("update per recording, split fixed, instruments", instruments, &rec.t),
-        ("update per recording, split fixed, stamps jittered", fixed, &jittered),
+        (
+            "update per recording, split fixed, instruments",
+            instruments,
+            &rec.t,
+        ),
+        (
+            "update per recording, split fixed, stamps jittered",
+            fixed,
+            &jittered,
+        ),
     ] {
         g.bench_function(name, |b| {
             b.iter(|| {

@@ -37,12 +37,30 @@
 //!
 //! **Instruments.** Noise in the regressors y_k and n̄_k still biases least squares (errors in
 //! variables: +5–8 % on θ1 of the rigid-body Khepera with 5 mm/s of wheel-speed noise). With
-//! [`OnlineForm::InstrumentalVariables`] (the default), once a channel's estimate maps to θ and
+//! [`OnlineForm::InstrumentalVariables`], once a channel's estimate maps to θ and
 //! has run `warmup_s` (from the start or its last change alarm), it is updated by recursive
 //! instrumental variables ([`wheelid_solvers::recursive::Rls::update_iv`]): ζ_k is φ_k with every measured output replaced
 //! by an auxiliary model's — the sampled eq. 2.19 run at the current estimates on the commands
 //! alone, v̂_{k+1} = â v̂_k + β̂0 u_k + β̂1 u_{k−1} + ĉ ω̂_k² (and ω̂ alike with v̂ ω̂), filtered
 //! by L — uncorrelated with the measurement noise (Young 1976; Söderström & Stoica 1983).
+//!
+//! **Output error** ([`OnlineForm::OutputError`], the default). Both the equation-error and
+//! the instrumental forms fit the sampled difference equation, whose coupling term is the
+//! product of window averages at the ends of a period; on the rigid-body Pioneer-like robot,
+//! whose ω channel the coupling θ5 v ω damps by a fifth, that puts θ2 3·10⁻⁴ (1.3–2.1 of its
+//! standard errors) from the batch output-error answer on every drive. The recursive
+//! prediction-error form of the output-error fit (Ljung & Söderström 1983, §3.7; Ljung 1999
+//! §11.3) minimises the batch fit's own criterion: once both channels have run `warmup_s`,
+//! eq. 2.19 is simulated at θ̂ on the commands alone over each period the stamps span (module
+//! `flow`: RK4, as the batch fit), and each channel takes a Gauss–Newton step
+//! ([`wheelid_solvers::recursive::Rls::update_gradient`]) on the output error y_{k+1} − ŷ_{k+1}
+//! (unfiltered) along its gradient ψ_{k+1} = â ψ_k + ∂(the sampled step)/∂(a, s, c), the
+//! coupling taken as given. For five time constants after the simulation starts (its start
+//! from the measured velocities, and ψ from zero, to die out) the channels stay on least
+//! squares. The change detector reads the prefiltered equation's one-step error throughout
+//! (an output error is coloured by the model's own dynamics). It needs the split fixed (the
+//! stamping known: the simulation reports what the host stamps); with it free this form runs
+//! the instruments.
 
 use wheelid_core::{Error, Result};
 use wheelid_solvers::recursive::{ChangeDetection, RlsSettings};
@@ -96,8 +114,9 @@ pub enum OnlineForm {
     LeastSquares,
     /// Recursive instrumental variables with an auxiliary model's outputs as instruments.
     InstrumentalVariables,
-    /// The recursive prediction-error form of the output-error fit: the auxiliary model's
-    /// simulated outputs against the measured ones, unfiltered (module docs, "Output error").
+    /// The recursive prediction-error form of the output-error fit: eq. 2.19 simulated at θ̂
+    /// against the measured outputs, unfiltered (module docs, "Output error"); with the split
+    /// free, as [`OnlineForm::InstrumentalVariables`].
     OutputError,
 }
 
@@ -150,8 +169,10 @@ pub struct OnlineTheta {
     since_reset: [u64; 2],
     /// Samples of warm-up before `form`.
     warmup: u64,
-    /// The stamps of the last two samples (newest first), once there \[s\].
-    times: [Option<f64>; 2],
+    /// The last sample's stamp, once there \[s\], and the period that led to it in nominal
+    /// periods (1 before).
+    stamp: Option<f64>,
+    rho: f64,
     /// The last sample as measured: (v, ω, ω², v ω).
     measured: [f64; 4],
     /// The split the stamping fixes (free where unknown).
@@ -208,12 +229,17 @@ impl OnlineTheta {
                 ChannelRls::new(settings.split.unwrap_or_default(), rls_settings)?,
             ],
             dt: dt_s,
-            form: settings.form,
+            // The output-error form simulates what the stamping reports: unknown, instruments.
+            form: match (settings.form, settings.split.unwrap_or_default()) {
+                (OnlineForm::OutputError, Split::Free) => OnlineForm::InstrumentalVariables,
+                (form, _) => form,
+            },
             sim: [0.0; 2],
             commands: [None; 2],
             since_reset: [0; 2],
             warmup: ((settings.warmup_s.max(0.0) / dt_s).ceil() as u64).max(1),
-            times: [None; 2],
+            stamp: None,
+            rho: 1.0,
             measured: [0.0; 4],
             split: settings.split.unwrap_or_default(),
             flow: None,
@@ -260,7 +286,7 @@ impl OnlineTheta {
         // (u_k, u_{k−1}) of the step to this sample.
         let held = self.commands.map(|c| c.unwrap_or([0.0; 2]));
         self.commands = [Some([v_ref, w_ref]), self.commands[0]];
-        self.times = [Some(t), self.times[0]];
+        (self.stamp, self.rho) = (Some(t), rho[0]);
         self.measured = [v, w, w * w, v * w];
         let [Some(q), Some(o)] = self.last else {
             self.last = [Some(now), self.last[0]];
@@ -310,8 +336,8 @@ impl OnlineTheta {
         let runs = self.form == OnlineForm::OutputError
             && refined == [true, true]
             && self.split != Split::Free;
-        let theta = if runs { self.theta() } else { [f64::NAN; 6] };
-        let (true, [Some(u), _]) = (theta.iter().all(|x| x.is_finite()), self.commands) else {
+        let rates = [0, 1].map(|i| runs.then(|| self.rls[i].rates(self.dt)).flatten());
+        let ([Some(v), Some(w)], [Some(u), _]) = (rates, self.commands) else {
             self.flow = None;
             return None;
         };
@@ -319,23 +345,20 @@ impl OnlineTheta {
             self.rls.iter_mut().for_each(ChannelRls::reset_gradient);
         }
         let (sim, dt) = (self.sim, self.dt);
-        let flow = self.flow.get_or_insert_with(|| Flow::start(sim, &theta, dt));
-        Some(flow.advance(&theta, u, rho[0] * dt, self.split))
+        let flow = self
+            .flow
+            .get_or_insert_with(|| Flow::start(sim, [v, w], dt));
+        Some(flow.advance([v, w], u, rho[0] * dt, self.split))
     }
 
-    /// (T_k/T, T_{k−1}/T): the periods from the last sample to the one stamped `t` and the one
+    /// (T_k/T, T_{k−1}/T): the period from the last sample to the one stamped `t` and the one
     /// before it, in nominal periods (1 where a stamp is missing or not after the last).
     fn period_ratios(&self, t: f64) -> [f64; 2] {
-        let ratio = |later: f64, earlier: Option<f64>| match earlier {
-            Some(e) if later > e => (later - e) / self.dt,
+        let rho = match self.stamp {
+            Some(e) if t > e => (t - e) / self.dt,
             _ => 1.0,
         };
-        let rho = ratio(t, self.times[0]);
-        let before = match self.times[0] {
-            Some(q) => ratio(q, self.times[1]),
-            None => 1.0,
-        };
-        [rho, before]
+        [rho, self.rho]
     }
 
     /// Each channel's jitter correction d_k for the step from the last sample to this one
@@ -344,6 +367,9 @@ impl OnlineTheta {
         let [Some(u0), u1] = self.commands else {
             return [0.0; 2];
         };
+        if rho.iter().all(|r| (r - 1.0).abs() < 1e-9) {
+            return [0.0; 2];
+        }
         let u1 = u1.unwrap_or(u0);
         std::array::from_fn(|i| {
             let n = 0.5 * (self.measured[2 + i] + n_now[i]);
@@ -360,7 +386,8 @@ impl OnlineTheta {
     }
 
     /// The auxiliary model's (v̂, ω̂) at this sample (module docs, "Instruments"): one step of
-    /// each instrumented channel's difference equation from the last sample; the measured
+    /// each instrumented channel's difference equation from the last sample (the coupling held
+    /// at its value there: instruments need only be correlated with the regressors); the measured
     /// value where a channel is not instrumented (so that its model starts from the robot).
     fn simulate(&self, measured: [f64; 2], refined: [bool; 2], rho: [f64; 2]) -> [f64; 2] {
         let [Some(r0), older] = self.commands else {
@@ -369,27 +396,13 @@ impl OnlineTheta {
         let r1 = older.unwrap_or(r0);
         let [vh, wh] = self.sim;
         let held = [wh * wh, vh * wh];
-        // y_{k+1} = p + q n̄_k per channel, n̄_k the coupling's trapezoidal mean over the step
-        // (as in the regression): solved by fixed-point steps from the held coupling (each
-        // contracts by about q n/2, a fraction of a per cent).
-        let steps: [(f64, f64); 2] = std::array::from_fn(|i| {
-            self.rls[i].step(rho, self.sim[i], [r0[i], r1[i]])
-        });
-        let advance = |n: [f64; 2]| -> [f64; 2] {
-            std::array::from_fn(|i| {
-                if refined[i] {
-                    steps[i].0 + steps[i].1 * n[i]
-                } else {
-                    measured[i]
-                }
-            })
-        };
-        let mut next = advance(held);
-        for _ in 0..3 {
-            let [v1, w1] = next;
-            next = advance([0.5 * (held[0] + w1 * w1), 0.5 * (held[1] + v1 * w1)]);
-        }
-        next
+        std::array::from_fn(|i| {
+            if !refined[i] {
+                return measured[i];
+            }
+            let (p, q) = self.rls[i].step(rho, self.sim[i], [r0[i], r1[i]]);
+            p + q * held[i]
+        })
     }
 
     /// θ̂1…θ̂6 (the units of `wheelid_models::regressor::PARAMS`; NaN while a channel's

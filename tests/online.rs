@@ -154,7 +154,10 @@ fn online_theta_converges_to_the_batch_answer_under_host_jitter() {
             eprintln!("{name} seed {seed}: {z:+.2?} standard errors from batch");
             worst = z.iter().fold(worst, |w, z| w.max(z.abs()));
         }
-        eprintln!("{name}: worst |z| {worst:.2} over seeds {:?}", jitter_seeds());
+        eprintln!(
+            "{name}: worst |z| {worst:.2} over seeds {:?}",
+            jitter_seeds()
+        );
         worst_of.push((name, worst));
     }
     for (name, worst) in worst_of {

@@ -1,8 +1,8 @@
 //! The output-error form's simulated outputs: eq. 2.19 integrated at θ̂ over each period the
 //! stamps actually span, as the batch output-error fit simulates it
-//! (`wheelid_models::dynamics`: classical RK4 at a fifth of the faster time constant, window
-//! integrals by the same stages), so that the recursion and the batch fit compare the robot
-//! with the same model:
+//! (`wheelid_models::dynamics`: classical RK4, window integrals by the same stages; here at
+//! half the faster time constant, two sub-steps a period at least: [`SUBSTEPS_PER_TAU`]), so
+//! that the recursion and the batch fit compare the robot with the same model:
 //!
 //! ```text
 //! θ1 v̇ = v_ref − θ4 v + θ3 ω²,   θ2 ω̇ = ω_ref − θ6 ω − θ5 v ω,   (v_ref, ω_ref) held over [s_k, s_{k+1})
@@ -11,25 +11,30 @@
 //! ```
 //!
 //! The sampled difference equation with the coupling's trapezoidal mean (module docs of
-//! [`super`]) errs by a few 10⁻⁴ of θ2 on the rigid-body Pioneer-like robot, where the coupling
-//! θ5 v ω is a fifth of the ω channel's damping: as large as the batch interval.
+//! [`super`]) errs by 3·10⁻⁴ of θ2 on the rigid-body Pioneer-like robot (2–3 standard errors of
+//! the batch answer), where the coupling θ5 v ω is a fifth of the ω channel's damping; so does
+//! an exponential integrator with the coupling ramped over the period, and one with the ω
+//! pole frozen at v's mean over it errs by 1.5·10⁻⁴ of θ6 (measured, tuning seeds 1–5).
 
 use wheelid_models::dynamics::rk4_step;
 
 use super::Split;
+use super::split::Rates;
 
-/// RK4 sub-steps per time constant of the faster channel: 3 (the batch simulation takes 5, at
-/// most 20 ms; 3 moves the online answer by at most 0.05 of its standard errors on the
-/// rigid-body robots, 2 by up to 1.4).
-const SUBSTEPS_PER_TAU: f64 = 3.0;
+/// RK4 sub-steps per time constant of the faster channel, and at least [`MIN_SUBSTEPS`] a
+/// period. The batch simulation takes 5 (at most 20 ms apart). Measured against the batch
+/// answer on the rigid-body robots (tuning seeds 1–5, ± 10 % jitter): 3 a time constant moves
+/// the online θ by at most 0.05 of its standard errors from 5's; 2 (with two a period at
+/// least) by at most 0.1 more on the Khepera-like robot and nothing on the Pioneer-like one;
+/// 2 with one a period allowed (the Pioneer-like robot's 0.1 s against its 0.25 s) by up to
+/// 1.4 standard errors. Each sub-step costs about 30 ns.
+const SUBSTEPS_PER_TAU: f64 = 2.0;
+
+/// Fewest RK4 sub-steps a period.
+const MIN_SUBSTEPS: usize = 2;
 
 /// Most RK4 sub-steps a period.
 const MAX_SUBSTEPS: usize = 12;
-
-/// Corrections of the coupling's value at the period's end after the first prediction (each
-/// contracts the error by about the coupling's share of the damping times the period over
-/// the time constant).
-const CORRECTIONS: usize = 2;
 
 /// The simulated robot between samples.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -46,13 +51,17 @@ impl Flow {
     /// A simulation started at the state `x` (the measured velocities: the transient of the
     /// difference, and of the gradient started at zero, dies out at the robot's own time
     /// constants: five of the slower of θ's, over periods of `dt` \[s\], at least five).
-    pub(super) fn start(x: [f64; 2], theta: &[f64; 6], dt: f64) -> Self {
-        let tau = (theta[0] / theta[3]).max(theta[1] / theta[5]);
+    pub(super) fn start(x: [f64; 2], rates: [Rates; 2], dt: f64) -> Self {
+        let tau = 1.0 / rates[0].pole.min(rates[1].pole);
         let settle = (5.0 * tau / dt).ceil();
         Self {
             x,
             age: 0,
-            settle: if settle.is_finite() { (settle as u64).max(5) } else { 5 },
+            settle: if settle.is_finite() {
+                (settle as u64).max(5)
+            } else {
+                5
+            },
         }
     }
 
@@ -62,35 +71,38 @@ impl Flow {
         self.age >= self.settle
     }
 
-    /// Advances over `period` \[s\] under the held command `u` = (v_ref, ω_ref) at `theta`
-    /// (θ1…θ6) and returns the outputs the stamping `split` reports (window averages for
-    /// [`Split::WindowAverage`], else the instants) — by the exponential integrator of the
-    /// module docs.
+    /// Advances over `period` \[s\] under the held command `u` = (v_ref, ω_ref) at the channels'
+    /// `rates` (ẏ = r (K u + C n − y), n = ω², v ω: eq. 2.19 divided through by θ4, θ6) and
+    /// returns the outputs the stamping `split` reports (window averages for
+    /// [`Split::WindowAverage`], else the instants).
     pub(super) fn advance(
         &mut self,
-        theta: &[f64; 6],
+        rates: [Rates; 2],
         u: [f64; 2],
         period: f64,
         split: Split,
     ) -> [f64; 2] {
-        let [t1, t2, t3, t4, t5, t6] = *theta;
-        let tau = (t1 / t4).min(t2 / t6);
-        let steps = ((period * SUBSTEPS_PER_TAU / tau).ceil() as usize).clamp(1, MAX_SUBSTEPS);
+        let [v, w] = rates;
+        let steps = ((period * SUBSTEPS_PER_TAU * v.pole.max(w.pole)).ceil() as usize)
+            .clamp(MIN_SUBSTEPS, MAX_SUBSTEPS);
+        let inv = 1.0 / period;
         let h = period / steps as f64;
-        let (i1, i2) = (1.0 / t1, 1.0 / t2);
-        let f = |x: &[f64; 2], u: (f64, f64)| {
+        // r (K u + C n − y) with the products of constants taken once (each RK4 stage is then
+        // two multiply-adds deep).
+        let forced = [v.pole * v.gain * u[0], w.pole * w.gain * u[1]];
+        let coupled = [v.pole * v.coupling, w.pole * w.coupling];
+        let f = |x: &[f64; 2], _: (f64, f64)| {
             [
-                (t3 * x[1] * x[1] - t4 * x[0] + u.0) * i1,
-                (-t5 * x[0] * x[1] - t6 * x[1] + u.1) * i2,
+                (forced[0] - v.pole * x[0]) + coupled[0] * (x[1] * x[1]),
+                (forced[1] - w.pole * x[1]) + coupled[1] * (x[0] * x[1]),
             ]
         };
         let mut integral = [0.0; 2];
-        let held = (u[0], u[1]);
         let mut x1 = self.x;
         for _ in 0..steps {
-            rk4_step(f, &mut x1, &mut integral, held, held, h);
+            rk4_step(f, &mut x1, &mut integral, (u[0], u[1]), (u[0], u[1]), h);
         }
-        let mean = integral.map(|q| q / period);
+        let mean = integral.map(|q| q * inv);
         self.x = x1;
         self.age += 1;
         match split {
@@ -104,6 +116,22 @@ impl Flow {
 mod tests {
     use super::*;
 
+    /// The rates of θ (module docs).
+    fn rates(t: &[f64; 6]) -> [Rates; 2] {
+        [
+            Rates {
+                pole: t[3] / t[0],
+                gain: 1.0 / t[3],
+                coupling: t[2] / t[3],
+            },
+            Rates {
+                pole: t[5] / t[1],
+                gain: 1.0 / t[5],
+                coupling: -t[4] / t[5],
+            },
+        ]
+    }
+
     /// A linear channel (θ3 = θ5 = 0) under a held command: the instant and the window average
     /// against their closed forms, x(T) = K u + (x0 − K u) e^{−T/τ} and its mean
     /// K u + (x0 − K u) (τ/T)(1 − e^{−T/τ}), within RK4's error at a third of the time
@@ -113,7 +141,7 @@ mod tests {
         let theta = [0.3, 0.2, 0.0, 1.2, 0.0, 0.8];
         let (u, x0, period) = ([0.6, -0.4], [0.1, 0.2], 0.1);
         for split in [Split::Instant, Split::WindowAverage] {
-            let got = Flow::start(x0, &theta, 0.1).advance(&theta, u, period, split);
+            let got = Flow::start(x0, rates(&theta), 0.1).advance(rates(&theta), u, period, split);
             for i in 0..2 {
                 let (tau, gain) = (theta[i] / theta[[3, 5][i]], 1.0 / theta[[3, 5][i]]);
                 let e = (-period / tau).exp();
@@ -123,7 +151,11 @@ mod tests {
                     _ => gain * u[i] + dev * e,
                 };
                 let err = (got[i] - want).abs() / dev.abs();
-                assert!(err < 3e-5, "{split:?} {i}: {} vs {want} ({err:.1e})", got[i]);
+                assert!(
+                    err < 3e-5,
+                    "{split:?} {i}: {} vs {want} ({err:.1e})",
+                    got[i]
+                );
             }
         }
     }
@@ -137,7 +169,7 @@ mod tests {
         use wheelid_models::dynamics::accel;
         let theta = [0.26, 0.25, 0.005, 1.0, 0.2, 1.0];
         let period = 0.1;
-        let mut flow = Flow::start([0.0; 2], &theta, period);
+        let mut flow = Flow::start([0.0; 2], rates(&theta), period);
         let mut fine = [0.0f64; 2];
         let mut worst = 0.0f64;
         let f = |x: &[f64; 2], u: (f64, f64)| {
@@ -151,7 +183,7 @@ mod tests {
             for _ in 0..1000 {
                 rk4_step(f, &mut fine, &mut q, held, held, period / 1000.0);
             }
-            let mean = flow.advance(&theta, u, period, Split::WindowAverage);
+            let mean = flow.advance(rates(&theta), u, period, Split::WindowAverage);
             for i in 0..2 {
                 worst = worst.max((mean[i] - q[i] / period).abs());
                 worst = worst.max((flow.x[i] - fine[i]).abs());

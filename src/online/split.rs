@@ -84,6 +84,17 @@ fn shares(split: Split, a: f64, ln: f64) -> ([f64; 2], [f64; 2]) {
     }
 }
 
+/// A channel's continuous-time rates at its estimate ([`ChannelRls::rates`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct Rates {
+    /// r = 1/τ \[1/s\].
+    pub pole: f64,
+    /// K.
+    pub gain: f64,
+    /// C.
+    pub coupling: f64,
+}
+
 /// One channel's recursive estimator: four free parameters, or three with the split fixed;
 /// with (a, β0, β1, c) and the next update's weights kept from its last update (read several
 /// times a sample: one logarithm an update instead of one a reading).
@@ -224,6 +235,24 @@ impl ChannelRls {
         };
         self.refresh();
         step
+    }
+
+    /// The channel's continuous-time rates at the estimate, for samples `dt` \[s\] apart: the
+    /// pole r = 1/τ = −ln â/T, the gain K = s/(1 − â) and the coupling's C = c/(1 − â) of
+    /// ẏ = r (K u + C n − y) (v: K = 1/θ4, C = θ3/θ4; ω: K = 1/θ6, C = −θ5/θ6); `None` where
+    /// the estimate does not map (0 < â < 1, s > 0).
+    pub(super) fn rates(&self, dt: f64) -> Option<Rates> {
+        let [a, b0, b1, c] = self.theta;
+        let s = b0 + b1;
+        if !(a > 0.0 && a < 1.0 && s > 0.0) {
+            return None;
+        }
+        let inv = 1.0 / (1.0 - a);
+        Some(Rates {
+            pole: -self.ln_a() / dt,
+            gain: s * inv,
+            coupling: c * inv,
+        })
     }
 
     /// ln â (kept from the last update where the split is fixed).
