@@ -489,6 +489,12 @@ impl OnlineTheta {
         [self.rls[0].changes(), self.rls[1].changes()]
     }
 
+    /// The form after the warm-up: the settings' (module docs), but the instruments where the
+    /// output-error form was asked for with the split free.
+    pub fn form(&self) -> OnlineForm {
+        self.form
+    }
+
     /// The sample period \[s\].
     pub fn dt(&self) -> f64 {
         self.dt

@@ -231,10 +231,19 @@ pub fn online_text(trace: &crate::run::OnlineTrace, id: &Identification) -> Stri
     use std::fmt::Write as _;
     let mut s = String::new();
     let n = trace.t.len();
+    use crate::online::OnlineForm;
+    let how = match trace.form {
+        Some(OnlineForm::LeastSquares) => "recursive least squares",
+        Some(OnlineForm::InstrumentalVariables) => {
+            "recursive least squares, then instrumental variables"
+        }
+        Some(OnlineForm::OutputError) | None => {
+            "recursive least squares, then the recursive output-error fit"
+        }
+    };
     let _ = writeln!(
         s,
-        "Online (recursive least squares, then instrumental variables, while driving, {n} \
-         samples; wheelid::online):"
+        "Online ({how}, while driving, {n} samples; wheelid::online):"
     );
     if let Some((target, reached)) = trace.accuracy {
         let whose = if trace.batch_checks.is_empty() {

@@ -625,6 +625,7 @@ fn online_estimator(
         .with_context(|| format!("{}: [online]", path.display()))?;
     let trace = OnlineTrace {
         accuracy: accuracy.map(|a| (a, None)),
+        form: Some(est.form()),
         ..OnlineTrace::default()
     };
     let batch = match (accuracy, file.accuracy_of, file.accuracy_every_s) {

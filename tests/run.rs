@@ -591,6 +591,11 @@ fn a_run_re_designs_its_excitation_from_the_online_estimate() {
     let first = &trace.redesigns[0];
     for i in [0, 1] {
         let e = (first.theta[i] - map[i]) / map[i];
+        eprintln!(
+            "θ̂{} at the first re-design: {:+.2} % of the map",
+            i + 1,
+            100.0 * e
+        );
         assert!(
             e.abs() < 0.06,
             "θ̂{} at the first re-design: {:+.3}",
@@ -607,6 +612,7 @@ fn a_run_re_designs_its_excitation_from_the_online_estimate() {
         .filter(|&k| rec.t[k] - rec.t[0] > takeover)
         .map(|k| (x[k] - x[0]).abs().max((y[k] - y[0]).abs()))
         .fold(0.0f64, f64::max);
+    eprintln!("the pose at most {worst:.3} m from the centre after the first take-over");
     assert!(worst < 1.5, "the pose reached {worst} m from the centre");
 
     // The same drive on the prior's design alone (never re-designed).
@@ -621,6 +627,7 @@ fn a_run_re_designs_its_excitation_from_the_online_estimate() {
     };
     for (i, at_least) in [(0, 3.0), (1, 2.0)] {
         let ratio = width(off_trace, i) / width(trace, i);
+        eprintln!("θ{}: online interval {ratio:.2}× narrower", i + 1);
         assert!(
             ratio > at_least,
             "θ{}: online interval {ratio:.2}× narrower",
@@ -629,6 +636,7 @@ fn a_run_re_designs_its_excitation_from_the_online_estimate() {
     }
     for (i, at_least) in [(0, 2.5), (1, 2.0)] {
         let batch = off.identification.std_err[i] / on.identification.std_err[i];
+        eprintln!("θ{}: batch standard error {batch:.2}× smaller", i + 1);
         assert!(
             batch > at_least,
             "θ{} batch standard error {batch:.2}× smaller",

@@ -27,6 +27,8 @@ pub struct OnlineTrace {
     pub redesigns: Vec<super::RedesignEvent>,
     /// With `accuracy_of = "batch"`: the batch checks on the way, in order.
     pub batch_checks: Vec<super::BatchCheck>,
+    /// The estimator's form after its warm-up ([`crate::online::OnlineTheta::form`]).
+    pub form: Option<crate::online::OnlineForm>,
 }
 
 impl OnlineTrace {
