@@ -336,7 +336,8 @@ impl OnlineTheta {
         let runs = self.form == OnlineForm::OutputError
             && refined == [true, true]
             && self.split != Split::Free;
-        let rates = [0, 1].map(|i| runs.then(|| self.rls[i].rates(self.dt)).flatten());
+        let inv_dt = 1.0 / self.dt;
+        let rates = [0, 1].map(|i| runs.then(|| self.rls[i].rates(inv_dt)).flatten());
         let ([Some(v), Some(w)], [Some(u), _]) = (rates, self.commands) else {
             self.flow = None;
             return None;

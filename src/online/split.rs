@@ -75,10 +75,13 @@ fn shares(split: Split, a: f64, ln: f64) -> ([f64; 2], [f64; 2]) {
     match split {
         Split::Instant | Split::Free => ([1.0, 0.0], [0.0, 0.0]),
         Split::WindowAverage => {
-            let gamma = (1.0 - a) / -ln;
-            let d_gamma = (ln + (1.0 - a) / a) / (ln * ln);
-            let w0 = (1.0 - gamma) / (1.0 - a);
-            let d_w0 = ((1.0 - gamma) - d_gamma * (1.0 - a)) / ((1.0 - a) * (1.0 - a));
+            // Three independent divisions; the rest multiplies.
+            let m = 1.0 - a;
+            let (inv_ln, inv_m, inv_a) = (1.0 / ln, 1.0 / m, 1.0 / a);
+            let gamma = -m * inv_ln;
+            let d_gamma = (ln + m * inv_a) * inv_ln * inv_ln;
+            let w0 = (1.0 - gamma) * inv_m;
+            let d_w0 = ((1.0 - gamma) - d_gamma * m) * inv_m * inv_m;
             ([w0, 1.0 - w0], [d_w0, -d_w0])
         }
     }
@@ -237,11 +240,11 @@ impl ChannelRls {
         step
     }
 
-    /// The channel's continuous-time rates at the estimate, for samples `dt` \[s\] apart: the
+    /// The channel's continuous-time rates at the estimate, for samples 1/`inv_dt` \[s\] apart: the
     /// pole r = 1/τ = −ln â/T, the gain K = s/(1 − â) and the coupling's C = c/(1 − â) of
     /// ẏ = r (K u + C n − y) (v: K = 1/θ4, C = θ3/θ4; ω: K = 1/θ6, C = −θ5/θ6); `None` where
     /// the estimate does not map (0 < â < 1, s > 0).
-    pub(super) fn rates(&self, dt: f64) -> Option<Rates> {
+    pub(super) fn rates(&self, inv_dt: f64) -> Option<Rates> {
         let [a, b0, b1, c] = self.theta;
         let s = b0 + b1;
         if !(a > 0.0 && a < 1.0 && s > 0.0) {
@@ -249,7 +252,7 @@ impl ChannelRls {
         }
         let inv = 1.0 / (1.0 - a);
         Some(Rates {
-            pole: -self.ln_a() / dt,
+            pole: -self.ln_a() * inv_dt,
             gain: s * inv,
             coupling: c * inv,
         })
