@@ -70,8 +70,8 @@ fn bench(c: &mut Criterion) {
         g.bench_function(name, |b| {
             b.iter(|| {
                 let mut est = OnlineTheta::new(settings, dt).expect("settings");
-                for k in 0..rec.len() {
-                    est.update(t[k], rec.v_ref[k], rec.w_ref[k], rec.v[k], rec.w[k]);
+                for (k, &stamp) in t.iter().enumerate() {
+                    est.update(stamp, rec.v_ref[k], rec.w_ref[k], rec.v[k], rec.w[k]);
                 }
                 est.theta()
             })

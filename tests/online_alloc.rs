@@ -8,7 +8,7 @@
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use wheelid::online::{OnlineSettings, OnlineTheta, Split};
+use wheelid::online::{OnlineForm, OnlineSettings, OnlineTheta, Split};
 
 struct Counting;
 
@@ -38,13 +38,18 @@ static GLOBAL: Counting = Counting;
 #[test]
 fn an_update_allocates_nothing() {
     let mut sum = 0.0;
-    // The split free and fixed by the stamping (three-parameter regressions).
+    // The split free (instruments) and fixed by the stamping (three-parameter regressions: the
+    // output-error form, the default, and the instruments).
     let fixed = OnlineSettings {
         split: Some(Split::WindowAverage),
         ..OnlineSettings::default()
     };
+    let instruments = OnlineSettings {
+        form: OnlineForm::InstrumentalVariables,
+        ..fixed
+    };
     let mut after = 0;
-    for settings in [OnlineSettings::default(), fixed] {
+    for settings in [OnlineSettings::default(), fixed, instruments] {
         let mut est = OnlineTheta::new(settings, 0.02).expect("settings");
         let before = ALLOCATIONS.load(Ordering::SeqCst);
         for k in 0..100_000 {

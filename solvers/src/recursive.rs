@@ -373,8 +373,8 @@ impl<const N: usize> Rls<N> {
         if zeta.is_none() {
             for i in 0..N {
                 let pi = pz[i] * inv_s;
-                for j in i..N {
-                    let x = (self.p[i][j] - pi * pz[j]) * inv_lambda;
+                for (j, pj) in pz.iter().enumerate().skip(i) {
+                    let x = (self.p[i][j] - pi * pj) * inv_lambda;
                     self.p[i][j] = x;
                     self.p[j][i] = x;
                 }
