@@ -1,6 +1,7 @@
 //! Online identification of θ1…θ6 (Laut 2011 eq. 2.19) on board, one sample at a time, by
-//! recursive least squares — then recursive instrumental variables — with forgetting and a
-//! change detector (`wheelid_solvers::recursive`) on prefiltered regressors.
+//! recursive least squares on prefiltered regressors — then the recursive prediction-error form
+//! of the output-error fit, or recursive instrumental variables — with forgetting and a change
+//! detector (`wheelid_solvers::recursive`).
 //!
 //! The batch pipeline filters forward and backward and differentiates numerically; neither
 //! runs causally, and a causal derivative of sampled data is biased when the period is not
@@ -33,7 +34,9 @@
 //! `wheelid_solvers::recursive`). Every signal first passes through the same causal low-pass
 //! L(q) = ((1 − p)/(1 − p q⁻¹))², p = e^{−2π f_c T}: a linear time-invariant filter leaves the
 //! difference equation as it is and weighs down the high band, where the measurement noise in
-//! the regressor y_k lives.
+//! the regressor y_k lives. Stamps that are not T apart (a host's jitter) change the sampled
+//! equation; each channel's target carries the change at the current estimate (module `split`,
+//! "Jitter").
 //!
 //! **Instruments.** Noise in the regressors y_k and n̄_k still biases least squares (errors in
 //! variables: +5–8 % on θ1 of the rigid-body Khepera with 5 mm/s of wheel-speed noise). With

@@ -14,9 +14,9 @@ pub(crate) struct RunArgs {
     /// Print the report as JSON.
     #[arg(long)]
     json: bool,
-    /// Also estimate θ̂ online while driving (recursive least squares, then instrumental
-    /// variables, with change detection; the file's `[online]` table or its defaults) and
-    /// write `online.csv`.
+    /// Also estimate θ̂ online while driving (recursive least squares, then the recursive
+    /// output-error fit — instrumental variables where the robot's stamping is unknown — with
+    /// change detection; the file's `[online]` table or its defaults) and write `online.csv`.
     #[arg(long)]
     online: bool,
 }

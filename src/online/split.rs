@@ -333,20 +333,23 @@ impl ChannelRls {
         }
         let ln = self.ln_a();
         let a_k = (rho[0] * ln).exp();
+        // Three divisions (1/(1 − a), and for window averages 1/(ρ_k ln a) and one for A_k):
+        // the jittered path is otherwise division-bound.
+        let inv_m = 1.0 / (1.0 - a);
         match self.split {
             Split::Free | Split::Instant => {
-                let scale = (1.0 - a_k) / (1.0 - a);
+                let scale = (1.0 - a_k) * inv_m;
                 (a_k * y + scale * (b0 * u[0] + b1 * u[1]), scale * c)
             }
             Split::WindowAverage => {
                 let a_prev = (rho[1] * ln).exp();
-                let gamma = |x: f64, r: f64| (1.0 - x) / (-r * ln);
-                let (g_k, g_prev) = (gamma(a_k, rho[0]), gamma(a_prev, rho[1]));
-                let big_a = g_k * a_prev / g_prev;
-                let gain = (b0 + b1) / (1.0 - a);
+                // γ(x, ρ) = (1 − x)/(−ρ ln a); A_k = γ_k a_{k−1}/γ_{k−1}, where ln a cancels.
+                let g_k = (1.0 - a_k) / (-rho[0] * ln);
+                let big_a = a_prev * (1.0 - a_k) * rho[1] / (rho[0] * (1.0 - a_prev));
+                let gain = (b0 + b1) * inv_m;
                 (
                     big_a * y + gain * ((1.0 - g_k) * u[0] + (g_k - big_a) * u[1]),
-                    c * (1.0 - big_a) / (1.0 - a),
+                    c * (1.0 - big_a) * inv_m,
                 )
             }
         }
