@@ -49,19 +49,34 @@ fn an_update_allocates_nothing() {
         ..fixed
     };
     let mut after = 0;
-    for settings in [OnlineSettings::default(), fixed, instruments] {
+    for (settings, form) in [
+        (OnlineSettings::default(), OnlineForm::InstrumentalVariables),
+        (fixed, OnlineForm::OutputError),
+        (instruments, OnlineForm::InstrumentalVariables),
+    ] {
         let mut est = OnlineTheta::new(settings, 0.02).expect("settings");
+        // A first-order robot (time constants 50 and 60 ms, unit gains) under held commands,
+        // so that θ̂ maps and each form runs after its warm-up.
+        let (a_v, a_w) = ((-0.02f64 / 0.05).exp(), (-0.02f64 / 0.06).exp());
+        let (mut v, mut w) = (0.0, 0.0);
         let before = ALLOCATIONS.load(Ordering::SeqCst);
         for k in 0..100_000 {
             let t = k as f64 * 0.02;
-            let (u, w) = ((0.7 * t).sin(), (1.9 * t).cos());
+            let (u, r) = (
+                0.3 + 0.2 * (0.7 * t).sin(),
+                (1.9 * t).cos() + 0.5 * (5.3 * t).sin(),
+            );
             // Stamps jittered by up to 10 % of the period (the jitter correction's path).
             let stamp = t + 0.002 * (1.7 * k as f64).sin();
-            let change = est.update(stamp, u, w, 0.9 * u, 0.8 * w);
+            let change = est.update(stamp, u, r, v, w);
             sum += est.theta()[0] + est.std_err()[1] + f64::from(u8::from(change.change[0]));
+            (v, w) = (a_v * v + (1.0 - a_v) * u, a_w * w + (1.0 - a_w) * r);
         }
         after = ALLOCATIONS.load(Ordering::SeqCst);
         assert_eq!(after - before, 0, "allocations in 100 000 updates");
+        // The form ran: both channels map to θ past their warm-up.
+        assert!(est.settled(), "{:?}: θ̂ {:?}", est.form(), est.theta());
+        assert_eq!(est.form(), form);
     }
     // Checks the counter counts: a Vec allocates.
     let v = std::hint::black_box(vec![sum; 3]);
