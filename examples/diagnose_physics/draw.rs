@@ -47,8 +47,16 @@ pub struct Demand {
     pub mu: Vec<f64>,
 }
 
-/// [`Demand`] of excitation `exc` on `p` over `duration` seconds.
-pub fn demand(p: &PhysicalProfile, exc: &Excitation, duration: f64) -> Demand {
+/// [`Demand`] of excitation `exc` on `p` over `duration` seconds; with `rate` (a rate
+/// limit's (v̇, ω̇) maxima) the voltages and friction coefficients are those under the
+/// setpoints it slews (ten sub-steps a period, the peak of each period kept): a clamp or a
+/// floor drawn from the unlimited demand would never bind behind the limit.
+pub fn demand(
+    p: &PhysicalProfile,
+    exc: &Excitation,
+    duration: f64,
+    rate: Option<(f64, f64)>,
+) -> Demand {
     let th = p.theta();
     let dt = p.period_s;
     let (tau_v, tau_w) = (th[0] / th[3], th[1] / th[5]);
@@ -63,26 +71,39 @@ pub fn demand(p: &PhysicalProfile, exc: &Excitation, duration: f64) -> Demand {
         volts: Vec::with_capacity(n),
         mu: Vec::with_capacity(n),
     };
+    // The setpoints the robot's loop sees (the commands, or slewed by the rate limit).
+    let mut set = (0.0, 0.0);
+    let subs = if rate.is_some() { 10 } else { 1 };
+    let h = dt / subs as f64;
     for k in 0..n {
         let (vr, wr) = exc.at(k as f64 * dt);
         out.slope_v.push((vr - prev.0).abs() / dt);
         out.slope_w.push((wr - prev.1).abs() / dt);
         prev = (vr, wr);
-        let (v_ss, w_ss) = (vr / th[3], wr / th[5]);
-        let (dv, dw) = ((v_ss - v) / tau_v, (w_ss - w) / tau_w);
         let (mut volts, mut mu) = (0.0f64, 0.0f64);
-        for s in [1.0, -1.0] {
-            let rate = (v + s * p.d * w / 2.0) / p.r;
-            let acc = (dv + s * p.d * dw / 2.0) / p.r;
-            let force = p.m * dv / 2.0 + s * i_ax * dw / p.d;
-            let torque = p.r * force + p.i_e * acc + p.b_e * rate;
-            volts = volts.max((p.k_b * rate + p.r_a * torque / p.k_a).abs());
-            mu = mu.max(force.hypot(p.m * v * w / 2.0) / n_wheels);
+        for _ in 0..subs {
+            set = match rate {
+                Some((a_v, a_w)) => (
+                    set.0 + (vr - set.0).clamp(-a_v * h, a_v * h),
+                    set.1 + (wr - set.1).clamp(-a_w * h, a_w * h),
+                ),
+                None => (vr, wr),
+            };
+            let (v_ss, w_ss) = (set.0 / th[3], set.1 / th[5]);
+            let (dv, dw) = ((v_ss - v) / tau_v, (w_ss - w) / tau_w);
+            for s in [1.0, -1.0] {
+                let spin = (v + s * p.d * w / 2.0) / p.r;
+                let acc = (dv + s * p.d * dw / 2.0) / p.r;
+                let force = p.m * dv / 2.0 + s * i_ax * dw / p.d;
+                let torque = p.r * force + p.i_e * acc + p.b_e * spin;
+                volts = volts.max((p.k_b * spin + p.r_a * torque / p.k_a).abs());
+                mu = mu.max(force.hypot(p.m * v * w / 2.0) / n_wheels);
+            }
+            v = v_ss + (v - v_ss) * (-h / tau_v).exp();
+            w = w_ss + (w - w_ss) * (-h / tau_w).exp();
         }
         out.volts.push(volts);
         out.mu.push(mu);
-        v = v_ss + (v - v_ss) * (-dt / tau_v).exp();
-        w = w_ss + (w - w_ss) * (-dt / tau_w).exp();
     }
     out
 }
@@ -128,13 +149,13 @@ pub fn friction_loss_per_nm(p: &PhysicalProfile) -> (f64, f64) {
 /// | --- | --- |
 /// | latency | (0.5 + 2.5u) host periods |
 /// | rate_limit | (0.2 + 0.3u) × the 95th percentile of the command's slope \|Δu\|/Δ, v and ω alike |
-/// | voltage_clamp | the (0.80 + 0.15u)-quantile of the per-period peak voltage ([`Demand`]): binds in ~5–20 % of the periods |
+/// | voltage_clamp | the (0.80 + 0.15u)-quantile of the per-period peak voltage ([`Demand`]; behind a rate limit, under the setpoints it slews): binds in ~5–20 % of the periods |
 /// | gain_sag | fraction 0.1 + 0.2u lost by the run's end |
 /// | gain_decay | τ such that 0.1 + 0.2u is lost by the run's end |
 /// | amp_gain_right | 0.90 + 0.05u or 1.05 + 0.05u (even/odd second draw) |
 /// | tyre_radius_right | 1.02 + 0.03u |
 /// | dry_friction_nm | the torque whose steady loss driving straight is (3 + 7u) % of v_amp = 0.3 v_max ([`friction_loss_per_nm`]) |
-/// | floor_mu | (0.4 + 0.2u) × the 95th percentile of the per-period peak friction coefficient needed ([`Demand`]; the estimate runs high: the Khepera-like robot slips on ~5–20 % of the rows) |
+/// | floor_mu | (0.4 + 0.2u) × the 95th percentile of the per-period peak friction coefficient needed ([`Demand`]; behind a rate limit, under the setpoints it slews; the estimate runs high: the Khepera-like robot slips on ~5–20 % of the rows) |
 /// | payload | (0.3 + 0.7u) m, set down at (30 + 40u) % of the run, (0.25 + 0.5u) x_caster ahead of the axle, a cube of side d/3 |
 ///
 /// # Errors
@@ -151,8 +172,10 @@ pub fn draw_effects(
         .effects
         .iter()
         .any(|e| matches!(*e, "rate_limit" | "voltage_clamp" | "floor_mu"));
-    let dem = need_demand.then(|| demand(p, exc, spec.duration_s));
+    let dem = need_demand.then(|| demand(p, exc, spec.duration_s, None));
     let dem = dem.as_ref();
+    // Behind a rate limit a clamp or a floor is drawn from the demand the limit leaves.
+    let mut limited: Option<Demand> = None;
     for &name in &spec.effects {
         let stream = TRUTH
             .iter()
@@ -182,6 +205,12 @@ pub fn draw_effects(
                 m.insert("binds_share_w".into(), share_above(&d.slope_w, a_w));
             }
             ("voltage_clamp", Some(d)) => {
+                let d = match fx.rate_limit {
+                    Some(r) => &*limited.get_or_insert_with(|| {
+                        demand(p, exc, spec.duration_s, Some((r.v_accel, r.w_accel)))
+                    }),
+                    None => d,
+                };
                 let q = 0.80 + 0.15 * u(0);
                 let volts = quantile(&d.volts, q);
                 fx.voltage_clamp = Some(volts);
@@ -235,6 +264,12 @@ pub fn draw_effects(
                 m.insert("steady_loss_w".into(), f * dw);
             }
             ("floor_mu", Some(d)) => {
+                let d = match fx.rate_limit {
+                    Some(r) => &*limited.get_or_insert_with(|| {
+                        demand(p, exc, spec.duration_s, Some((r.v_accel, r.w_accel)))
+                    }),
+                    None => d,
+                };
                 let frac = 0.4 + 0.2 * u(0);
                 let mu = frac * quantile(&d.mu, 0.95);
                 fx.floor_mu = Some(mu);

@@ -218,6 +218,8 @@ pub struct Record {
     pub named_params: BTreeMap<String, BTreeMap<String, f64>>,
     /// Their standard errors (a change time: the half width of its interval).
     pub named_std_err: BTreeMap<String, BTreeMap<String, f64>>,
+    /// The candidates fitted and turned down, with why.
+    pub rejected: Vec<(String, String)>,
     /// Whether a mismatch was declared.
     pub mismatch: bool,
     /// Channels of the unexplained structure, if any.
@@ -375,6 +377,7 @@ pub fn run_one(spec: &RunSpec, cache: &CleanRuns) -> Record {
         named: Vec::new(),
         named_params: BTreeMap::new(),
         named_std_err: BTreeMap::new(),
+        rejected: Vec::new(),
         mismatch: false,
         unexplained: None,
         exactly_right: false,
@@ -476,6 +479,11 @@ fn run_into(spec: &RunSpec, cache: &CleanRuns, rec: &mut Record) -> Result<()> {
         .findings
         .iter()
         .map(|f| (f.effect.clone(), f.std_err.clone()))
+        .collect();
+    rec.rejected = d
+        .rejected
+        .iter()
+        .map(|r| (r.effect.clone(), r.reason.clone()))
         .collect();
     rec.mismatch = d.mismatch;
     rec.unexplained = d.unexplained.as_ref().map(|u| u.channels.clone());

@@ -146,6 +146,7 @@ pub(super) fn verdict(
         && s.p_value * (n.pattern.grid as f64) < settings.alpha
         && s.stat > FINGERPRINT_LEFT * n.score.stat
         && !small_effect_left(c, &new, &n.pattern, &s.beta, data)
+        && !small_share_left(s.explained, &frame.residuals(&cx.cur.sim), &e_new)
     {
         let base = new.theta.len() - c.params().len();
         let mut moved = new.theta.clone();
@@ -156,12 +157,14 @@ pub(super) fn verdict(
         }
         return Err(Refusal {
             reason: format!(
-                "its fingerprint stays (χ²({}) = {:.1} of {:.1}, p = {:.1e}; validation cost \
-                 −{:.1} %, fit v {:.1} %, ω {:.1} %)",
+                "its fingerprint stays (χ²({}) = {:.1} of {:.1}, p = {:.1e}; it still explains \
+                 {:.1} % of what the candidate explained; validation cost −{:.1} %, fit v \
+                 {:.1} %, ω {:.1} %)",
                 s.dof,
                 s.stat,
                 n.score.stat,
                 s.p_value,
+                100.0 * share_left(s.explained, &frame.residuals(&cx.cur.sim), &e_new),
                 100.0 * drop,
                 after.v.fit_percent,
                 after.w.fit_percent
@@ -202,6 +205,56 @@ fn small_effect_left(
         .all(|(&j, b)| b.abs() <= EFFECT_LEFT * (new.theta[base + j] - null[j]).abs())
 }
 
+/// Share of what a fitted candidate explained that its fingerprint still explains: `left` (the
+/// training cost one more Gauss–Newton step along the pattern would take off,
+/// [`score::Score::explained`]) over the training cost the candidate took off, ‖e_before‖² −
+/// ‖e_after‖² (weighted training residuals). +∞ where the candidate took nothing off.
+fn share_left(left: f64, before: &nalgebra::DVector<f64>, after: &nalgebra::DVector<f64>) -> f64 {
+    let gained = before.norm_squared() - after.norm_squared();
+    if gained > 0.0 {
+        left / gained
+    } else {
+        f64::INFINITY
+    }
+}
+
+/// An effect size of what a fingerprint leaves, in the cost's own units (issue 15: "replace
+/// 'fingerprint stays' by an effect-size test"; a test statistic keeps its size on a residual
+/// that the fit has made a hundred times smaller): small when it still explains at most
+/// [`SHARE_LEFT`] of what the candidate explained ([`share_left`]). With two effects present
+/// the other one leaves a trace along this one's pattern that is significant on a long
+/// recording and yet small beside what this one took off.
+fn small_share_left(
+    left: f64,
+    before: &nalgebra::DVector<f64>,
+    after: &nalgebra::DVector<f64>,
+) -> bool {
+    share_left(left, before, after) <= SHARE_LEFT
+}
+
+/// Largest share of what a candidate explained that its fingerprint may still explain for it
+/// to count as gone ([`small_share_left`]).
+const SHARE_LEFT: f64 = 0.1;
+
 /// Largest step a fingerprint may still ask of a fitted parameter, as a share of its distance
 /// from the null, for the fingerprint to count as gone ([`small_effect_left`]).
 const EFFECT_LEFT: f64 = 0.2;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The share of what a candidate explained that its fingerprint still explains, on
+    /// closed-form residuals: ‖e‖² 100 → 10 took 90 off; 9 left is 10 % (small, at
+    /// [`SHARE_LEFT`]), 9.5 is not; a candidate that took nothing off leaves +∞.
+    #[test]
+    fn what_a_fingerprint_leaves_is_measured_against_what_was_taken_off() {
+        let before = nalgebra::DVector::from_vec(vec![6.0, 8.0]);
+        let after = nalgebra::DVector::from_vec(vec![1.0, 3.0]);
+        assert!((share_left(9.0, &before, &after) - 0.1).abs() < 1e-15);
+        assert!(small_share_left(9.0, &before, &after));
+        assert!(!small_share_left(9.5, &before, &after));
+        assert_eq!(share_left(1.0, &after, &before), f64::INFINITY);
+        assert!(!small_share_left(0.0, &before, &before));
+    }
+}

@@ -227,6 +227,10 @@ pub(crate) struct Score {
     pub p_value: f64,
     /// One Gauss–Newton step per column.
     pub beta: Vec<f64>,
+    /// What that step would take off ‖e‖² (the weighted training residual's sum of squares
+    /// along the pattern net of `q`: gᵀ (SₚᵀSₚ)⁻¹ g) — the effect size the pattern still
+    /// explains, in the units of the training cost.
+    pub explained: f64,
 }
 
 /// The score test of the pattern columns `s` (rows as `frame`) against weighted residuals `e`,
@@ -296,6 +300,7 @@ pub(crate) fn score(
     let stat = (g_total.transpose() * &meat_inv * &g_total)[(0, 0)].max(0.0);
     let bread = (sp.transpose() * &sp).pseudo_inverse(1e-14).ok()?;
     let beta_kept = &bread * &g_total;
+    let explained = g_total.dot(&beta_kept).max(0.0);
     let mut beta = vec![0.0; s.ncols()];
     for (a, &j) in keep.iter().enumerate() {
         beta[j] = beta_kept[a];
@@ -306,5 +311,6 @@ pub(crate) fn score(
         dof: k,
         p_value,
         beta,
+        explained,
     })
 }
