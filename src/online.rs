@@ -71,8 +71,8 @@ use wheelid_solvers::recursive::{ChangeDetection, RlsSettings};
 mod flow;
 mod split;
 use flow::Flow;
-use split::ChannelRls;
 pub use split::Split;
+use split::{ChannelRls, Jittered};
 
 /// Settings of the online estimator.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -160,7 +160,9 @@ pub struct OnlineTheta {
     last: [Option<[f64; SIGNALS]>; 2],
     /// v channel: (a, β0, β1, c) of (θ1, θ3, θ4); ω channel: of (θ2, θ5, θ6).
     rls: [ChannelRls; 2],
+    /// The nominal period T \[s\] and 1/T.
     dt: f64,
+    inv_dt: f64,
     /// The form after the warm-up.
     form: OnlineForm,
     /// The auxiliary model's (v̂, ω̂) at the last sample (the measured ones where a channel
@@ -232,6 +234,7 @@ impl OnlineTheta {
                 ChannelRls::new(settings.split.unwrap_or_default(), rls_settings)?,
             ],
             dt: dt_s,
+            inv_dt: 1.0 / dt_s,
             // The output-error form simulates what the stamping reports: unknown, instruments.
             form: match (settings.form, settings.split.unwrap_or_default()) {
                 (OnlineForm::OutputError, Split::Free) => OnlineForm::InstrumentalVariables,
@@ -262,11 +265,12 @@ impl OnlineTheta {
         let rho = self.period_ratios(t);
         let raw = [v_ref, w_ref, v, w, w * w, v * w];
         let refined = [self.refined(0), self.refined(1)];
-        let corrections = self.jitter_corrections(rho, [w * w, v * w]);
+        let jittered = self.jittered(rho);
+        let corrections = self.jitter_corrections(&jittered, [w * w, v * w]);
         let before = self.sim;
         self.sim = match (self.flow_step(refined, rho), self.form) {
             (Some(sim), _) => sim,
-            (None, OnlineForm::InstrumentalVariables) => self.simulate([v, w], refined, rho),
+            (None, OnlineForm::InstrumentalVariables) => self.simulate([v, w], refined, &jittered),
             (None, _) => [v, w],
         };
         let [vh, wh] = self.sim;
@@ -309,10 +313,11 @@ impl OnlineTheta {
                 }
                 (true, OnlineForm::OutputError) => {
                     let [v1, w1] = self.sim;
-                    let n = [
-                        0.5 * (before[1] * before[1] + w1 * w1),
-                        0.5 * (before[0] * before[1] + v1 * w1),
-                    ][i];
+                    let n = if i == 0 {
+                        0.5 * (before[1] * before[1] + w1 * w1)
+                    } else {
+                        0.5 * (before[0] * before[1] + v1 * w1)
+                    };
                     self.rls[i].advance_gradient([before[i], n], [held[0][i], held[1][i]]);
                     if self.flow.as_ref().is_some_and(Flow::settled) {
                         let error = [v, w][i] - self.sim[i];
@@ -339,9 +344,15 @@ impl OnlineTheta {
         let runs = self.form == OnlineForm::OutputError
             && refined == [true, true]
             && self.split != Split::Free;
-        let inv_dt = 1.0 / self.dt;
-        let rates = [0, 1].map(|i| runs.then(|| self.rls[i].rates(inv_dt)).flatten());
-        let ([Some(v), Some(w)], [Some(u), _]) = (rates, self.commands) else {
+        let inv_dt = self.inv_dt;
+        let rates = match (runs, self.commands[0]) {
+            (true, Some(u)) => self.rls[0]
+                .rates(inv_dt)
+                .zip(self.rls[1].rates(inv_dt))
+                .map(|r| (r, u)),
+            _ => None,
+        };
+        let Some(((v, w), u)) = rates else {
             self.flow = None;
             return None;
         };
@@ -365,19 +376,40 @@ impl OnlineTheta {
         [rho, self.rho]
     }
 
-    /// Each channel's jitter correction d_k for the step from the last sample to this one
-    /// (`n_now`: this sample's measured ω², v ω).
-    fn jitter_corrections(&self, rho: [f64; 2], n_now: [f64; 2]) -> [f64; 2] {
+    /// The commands (u_k, u_{k−1}) of the step from the last sample to this one, once there
+    /// (u_{k−1} = u_k at the second sample).
+    fn held(&self) -> Option<[[f64; 2]; 2]> {
         let [Some(u0), u1] = self.commands else {
+            return None;
+        };
+        Some([u0, u1.unwrap_or(u0)])
+    }
+
+    /// Each channel's step over the periods `rho` the samples spanned
+    /// ([`ChannelRls::jittered`]), taken once a sample for both its uses; `None` where the
+    /// periods are nominal (|ρ − 1| < 10⁻⁹), there are no commands yet, or â is not a share.
+    fn jittered(&self, rho: [f64; 2]) -> [Option<Jittered>; 2] {
+        match self.held() {
+            Some([u0, u1]) if !rho.iter().all(|r| (r - 1.0).abs() < 1e-9) => {
+                std::array::from_fn(|i| self.rls[i].jittered(rho, [u0[i], u1[i]]))
+            }
+            _ => [None; 2],
+        }
+    }
+
+    /// Each channel's jitter correction d_k for the step from the last sample to this one, from
+    /// its step over the periods spanned (`jittered`; zero where there is none) (`n_now`: this
+    /// sample's measured ω², v ω).
+    fn jitter_corrections(&self, jittered: &[Option<Jittered>; 2], n_now: [f64; 2]) -> [f64; 2] {
+        let Some([u0, u1]) = self.held() else {
             return [0.0; 2];
         };
-        if rho.iter().all(|r| (r - 1.0).abs() < 1e-9) {
-            return [0.0; 2];
-        }
-        let u1 = u1.unwrap_or(u0);
         std::array::from_fn(|i| {
+            let Some(j) = &jittered[i] else {
+                return 0.0;
+            };
             let n = 0.5 * (self.measured[2 + i] + n_now[i]);
-            self.rls[i].jitter_correction(rho, self.measured[i], [u0[i], u1[i]], n)
+            self.rls[i].jitter_correction(j, self.measured[i], [u0[i], u1[i]], n)
         })
     }
 
@@ -391,20 +423,26 @@ impl OnlineTheta {
 
     /// The auxiliary model's (v̂, ω̂) at this sample (module docs, "Instruments"): one step of
     /// each instrumented channel's difference equation from the last sample (the coupling held
-    /// at its value there: instruments need only be correlated with the regressors); the measured
-    /// value where a channel is not instrumented (so that its model starts from the robot).
-    fn simulate(&self, measured: [f64; 2], refined: [bool; 2], rho: [f64; 2]) -> [f64; 2] {
-        let [Some(r0), older] = self.commands else {
+    /// at its value there: instruments need only be correlated with the regressors), over the
+    /// periods the samples spanned where `jittered` holds that step ([`OnlineTheta::jittered`]);
+    /// the measured value where a channel is not instrumented (so that its model starts from
+    /// the robot).
+    fn simulate(
+        &self,
+        measured: [f64; 2],
+        refined: [bool; 2],
+        jittered: &[Option<Jittered>; 2],
+    ) -> [f64; 2] {
+        let Some([r0, r1]) = self.held() else {
             return measured;
         };
-        let r1 = older.unwrap_or(r0);
         let [vh, wh] = self.sim;
         let held = [wh * wh, vh * wh];
         std::array::from_fn(|i| {
             if !refined[i] {
                 return measured[i];
             }
-            let (p, q) = self.rls[i].step(rho, self.sim[i], [r0[i], r1[i]]);
+            let (p, q) = self.rls[i].step(jittered[i].as_ref(), self.sim[i], [r0[i], r1[i]]);
             p + q * held[i]
         })
     }

@@ -70,14 +70,14 @@ impl Split {
 const A_START: f64 = 0.5;
 
 /// The weights (w0, w1) of u_k and u_{k−1} (w0 + w1 = 1: β0 = s w0(a), β1 = s w1(a), s =
-/// β0 + β1 = K (1 − a)), and their derivatives by a; `ln` = ln a.
-fn shares(split: Split, a: f64, ln: f64) -> ([f64; 2], [f64; 2]) {
+/// β0 + β1 = K (1 − a)), and their derivatives by a; `ln` = ln a, `inv_m` = 1/(1 − a).
+fn shares(split: Split, a: f64, ln: f64, inv_m: f64) -> ([f64; 2], [f64; 2]) {
     match split {
         Split::Instant | Split::Free => ([1.0, 0.0], [0.0, 0.0]),
         Split::WindowAverage => {
-            // Three independent divisions; the rest multiplies.
+            // Two divisions here (1/(1 − a) is the caller's); the rest multiplies.
             let m = 1.0 - a;
-            let (inv_ln, inv_m, inv_a) = (1.0 / ln, 1.0 / m, 1.0 / a);
+            let (inv_ln, inv_a) = (1.0 / ln, 1.0 / a);
             let gamma = -m * inv_ln;
             let d_gamma = (ln + m * inv_a) * inv_ln * inv_ln;
             let w0 = (1.0 - gamma) * inv_m;
@@ -98,9 +98,29 @@ pub(super) struct Rates {
     pub coupling: f64,
 }
 
+/// The sampled equation's step over the periods the samples actually spanned, at a channel's
+/// current estimate ([`ChannelRls::jittered`]; module docs, "Jitter"): y_{k+1} = `pole` y_k +
+/// `forced` + `coupling` n̄_k, with `pole` = a_k (instants, free split) or A_k (window
+/// averages). Both of a sample's uses — the target's correction d_k
+/// ([`ChannelRls::jitter_correction`]) and the instruments' auxiliary model
+/// ([`ChannelRls::step`]) — take it from the same y-free coefficients (the same commands u_k,
+/// u_{k−1}), so the period factors a^{ρ_k}, a^{ρ_{k−1}} are taken once a sample.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct Jittered {
+    /// a_k or A_k: the share of y_k kept over the period.
+    pub pole: f64,
+    /// The commands' part: (1 − a_k)/(1 − a) (β0 u_k + β1 u_{k−1}) (instants: K (1 − a_k)
+    /// u_k; the free split with both coefficients), or K ((1 − γ_k) u_k + (γ_k − A_k) u_{k−1})
+    /// (window averages).
+    pub forced: f64,
+    /// The coupling's coefficient, c (1 − a_k)/(1 − a) or c (1 − A_k)/(1 − a).
+    pub coupling: f64,
+}
+
 /// One channel's recursive estimator: four free parameters, or three with the split fixed;
-/// with (a, β0, β1, c) and the next update's weights kept from its last update (read several
-/// times a sample: one logarithm an update instead of one a reading).
+/// with (a, β0, β1, c), ln â, 1/(1 − â) and the next update's weights kept from its last update
+/// (read several times a sample: one logarithm and one division an update instead of one a
+/// reading).
 #[derive(Debug, Clone)]
 pub(super) struct ChannelRls {
     form: Form,
@@ -112,6 +132,8 @@ pub(super) struct ChannelRls {
     d_weights: [f64; 2],
     /// ln â with the split fixed (NaN where â ≤ 0; free: not kept, NaN).
     ln_a: f64,
+    /// 1/(1 − â) with the split fixed (free: not kept, NaN).
+    inv_m: f64,
     /// The split the stamping fixes (the jitter correction's form; `Free` for the free
     /// four-parameter regression).
     split: Split,
@@ -141,6 +163,7 @@ impl ChannelRls {
             weights: [1.0, 0.0],
             d_weights: [0.0; 2],
             ln_a: f64::NAN,
+            inv_m: f64::NAN,
             split,
             psi: [0.0; 4],
         };
@@ -148,19 +171,20 @@ impl ChannelRls {
         Ok(c)
     }
 
-    /// (a, β0, β1, c) and the weights from the estimate.
+    /// (a, β0, β1, c), ln â, 1/(1 − â) and the weights from the estimate.
     fn refresh(&mut self) {
         match &self.form {
             Form::Free(r) => self.theta = r.theta(),
             Form::Fixed(r, s) => {
                 let [a, sum, c] = r.theta();
                 self.ln_a = a.ln();
-                let (w, dw) = shares(*s, a, self.ln_a);
+                self.inv_m = 1.0 / (1.0 - a);
+                let (w, dw) = shares(*s, a, self.ln_a, self.inv_m);
                 self.theta = [a, sum * w[0], sum * w[1], c];
                 (self.weights, self.d_weights) = if a > 0.0 && a < 1.0 {
                     (w, dw)
                 } else {
-                    shares(*s, A_START, A_START.ln())
+                    shares(*s, A_START, A_START.ln(), 1.0 / (1.0 - A_START))
                 };
             }
         }
@@ -250,7 +274,7 @@ impl ChannelRls {
         if !(a > 0.0 && a < 1.0 && s > 0.0) {
             return None;
         }
-        let inv = 1.0 / (1.0 - a);
+        let inv = self.inv_m();
         Some(Rates {
             pole: -self.ln_a() * inv_dt,
             gain: s * inv,
@@ -266,6 +290,14 @@ impl ChannelRls {
         }
     }
 
+    /// 1/(1 − â) (kept from the last update where the split is fixed).
+    fn inv_m(&self) -> f64 {
+        match self.form {
+            Form::Free(_) => 1.0 / (1.0 - self.theta[0]),
+            Form::Fixed(..) => self.inv_m,
+        }
+    }
+
     /// (a, β0, β1, c).
     pub(super) fn theta(&self) -> [f64; 4] {
         self.theta
@@ -278,7 +310,7 @@ impl ChannelRls {
             Form::Free(r) => r.covariance(),
             Form::Fixed(r, s) => {
                 let [a, sum, _] = r.theta();
-                let ([w0, w1], [d0, d1]) = shares(*s, a, self.ln_a);
+                let ([w0, w1], [d0, d1]) = shares(*s, a, self.ln_a, self.inv_m);
                 let j = [
                     [1.0, 0.0, 0.0],
                     [sum * d0, w0, 0.0],
@@ -302,44 +334,46 @@ impl ChannelRls {
     }
 
     /// d_k: what the sampled equation at the periods the samples actually spanned adds to
-    /// the one at the nominal period T, at the current estimate (module docs, "Jitter"):
-    /// `rho` = (T_k/T, T_{k−1}/T), `y` = y_k, `u` = (u_k, u_{k−1}), `n` = n̄_k, all as
-    /// measured (unfiltered). Zero where â is not a share (0 < â < 1) or the periods are
+    /// the one at the nominal period T, at the current estimate (module docs, "Jitter"), from
+    /// that step's coefficients `jittered` ([`ChannelRls::jittered`]); `y` = y_k, `u` = (u_k,
+    /// u_{k−1}), `n` = n̄_k, all as measured (unfiltered). Where there is no such step (â not
+    /// a share, or the periods nominal) d_k is zero and the caller does not ask.
+    pub(super) fn jitter_correction(
+        &self,
+        jittered: &Jittered,
+        y: f64,
+        u: [f64; 2],
+        n: f64,
+    ) -> f64 {
+        let [a, b0, b1, c] = self.theta;
+        let offset = jittered.pole * y + jittered.forced;
+        offset + jittered.coupling * n - (a * y + b0 * u[0] + b1 * u[1] + c * n)
+    }
+
+    /// The coefficients of the sampled equation's step at the current estimate over the periods
+    /// `rho` = (T_k/T, T_{k−1}/T) under `u` = (u_k, u_{k−1}) (module docs, "Jitter", instants
+    /// (a) and window averages (b): a_k = â^{ρ_k}, and for window averages a_{k−1} =
+    /// â^{ρ_{k−1}}, γ_k and A_k); `None` where â is not a share
+    /// (0 < â < 1), where the nominal equation stands. The caller has found the periods not
     /// nominal.
-    pub(super) fn jitter_correction(&self, rho: [f64; 2], y: f64, u: [f64; 2], n: f64) -> f64 {
+    pub(super) fn jittered(&self, rho: [f64; 2], u: [f64; 2]) -> Option<Jittered> {
         let [a, b0, b1, c] = self.theta;
-        if self.nominal(rho) {
-            return 0.0;
-        }
-        let (offset, coupling) = self.step(rho, y, u);
-        offset + coupling * n - (a * y + b0 * u[0] + b1 * u[1] + c * n)
-    }
-
-    /// Whether the step over the periods `rho` is the nominal one: â not a share, or the
-    /// periods nominal.
-    fn nominal(&self, rho: [f64; 2]) -> bool {
-        let a = self.theta[0];
-        !(a > 0.0 && a < 1.0) || rho.iter().all(|r| (r - 1.0).abs() < 1e-9)
-    }
-
-    /// The sampled equation's step at the current estimate over the periods `rho` = (T_k/T,
-    /// T_{k−1}/T) from y_k = `y` under `u` = (u_k, u_{k−1}), as (p, q): y_{k+1} = p + q n̄_k
-    /// (module docs, "Jitter"; the nominal equation where â is not a share or the periods are
-    /// nominal).
-    pub(super) fn step(&self, rho: [f64; 2], y: f64, u: [f64; 2]) -> (f64, f64) {
-        let [a, b0, b1, c] = self.theta;
-        if self.nominal(rho) {
-            return (a * y + b0 * u[0] + b1 * u[1], c);
+        if !(a > 0.0 && a < 1.0) {
+            return None;
         }
         let ln = self.ln_a();
         let a_k = (rho[0] * ln).exp();
-        // Three divisions (1/(1 − a), and for window averages 1/(ρ_k ln a) and one for A_k):
-        // the jittered path is otherwise division-bound.
-        let inv_m = 1.0 / (1.0 - a);
-        match self.split {
+        // Three divisions (1/(1 − a), kept where the split is fixed; for window averages
+        // 1/(ρ_k ln a) and one for A_k): the jittered path is otherwise division-bound.
+        let inv_m = self.inv_m();
+        Some(match self.split {
             Split::Free | Split::Instant => {
                 let scale = (1.0 - a_k) * inv_m;
-                (a_k * y + scale * (b0 * u[0] + b1 * u[1]), scale * c)
+                Jittered {
+                    pole: a_k,
+                    forced: scale * (b0 * u[0] + b1 * u[1]),
+                    coupling: scale * c,
+                }
             }
             Split::WindowAverage => {
                 let a_prev = (rho[1] * ln).exp();
@@ -347,10 +381,25 @@ impl ChannelRls {
                 let g_k = (1.0 - a_k) / (-rho[0] * ln);
                 let big_a = a_prev * (1.0 - a_k) * rho[1] / (rho[0] * (1.0 - a_prev));
                 let gain = (b0 + b1) * inv_m;
-                (
-                    big_a * y + gain * ((1.0 - g_k) * u[0] + (g_k - big_a) * u[1]),
-                    c * (1.0 - big_a) * inv_m,
-                )
+                Jittered {
+                    pole: big_a,
+                    forced: gain * ((1.0 - g_k) * u[0] + (g_k - big_a) * u[1]),
+                    coupling: c * (1.0 - big_a) * inv_m,
+                }
+            }
+        })
+    }
+
+    /// The sampled equation's step at the current estimate from y_k = `y` under `u` = (u_k,
+    /// u_{k−1}), as (p, q): y_{k+1} = p + q n̄_k — over the periods the samples spanned where
+    /// `jittered` holds that step's coefficients ([`ChannelRls::jittered`]), else the nominal
+    /// equation (module docs, "Jitter").
+    pub(super) fn step(&self, jittered: Option<&Jittered>, y: f64, u: [f64; 2]) -> (f64, f64) {
+        match jittered {
+            Some(j) => (j.pole * y + j.forced, j.coupling),
+            None => {
+                let [a, b0, b1, c] = self.theta;
+                (a * y + b0 * u[0] + b1 * u[1], c)
             }
         }
     }
