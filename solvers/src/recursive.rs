@@ -310,9 +310,8 @@ impl<const N: usize> Rls<N> {
             };
         }
         let innovation = y - dot(phi, &self.theta);
-        let lambda = self.lambda();
-        let s = lambda + quadratic(phi, &self.p, phi);
-        let detect = innovation * innovation * lambda / s;
+        // The step normalises it with its own λ (taken once).
+        let detect = (innovation, quadratic(phi, &self.p, phi));
         let step = self.step(psi, None, error, (Some(error), Some(detect)));
         RlsUpdate {
             error: innovation,
@@ -332,14 +331,14 @@ impl<const N: usize> Rls<N> {
 
     /// One step of [`Rls::update`] (`zeta` none: P stays symmetric), [`Rls::update_iv`] or
     /// [`Rls::update_gradient`] (`given`: the prediction error, where it is not y − φᵀθ̂;
-    /// `detect`: the change detector's normalised squared innovation, where it is not this
-    /// step's own).
+    /// `detect`: the change detector's innovation e and φᵀ P φ of its regressor, where they are
+    /// not this step's own: it reads e² λ/(λ + φᵀ P φ)).
     fn step(
         &mut self,
         phi: &[f64; N],
         zeta: Option<&[f64; N]>,
         y: f64,
-        (given, detect): (Option<f64>, Option<f64>),
+        (given, detect): (Option<f64>, Option<(f64, f64)>),
     ) -> RlsUpdate {
         if !y.is_finite() || phi.iter().any(|x| !x.is_finite()) {
             return RlsUpdate {
@@ -393,7 +392,10 @@ impl<const N: usize> Rls<N> {
         let after = error * lambda * inv_s;
         self.hac
             .push(&std::array::from_fn(|i| z[i] * after), lambda);
-        let normalised = detect.unwrap_or(error * after);
+        let normalised = match detect {
+            Some((e, q)) => e * e * lambda / (lambda + q),
+            None => error * after,
+        };
         let change = self.detect(normalised);
         RlsUpdate { error, change }
     }
