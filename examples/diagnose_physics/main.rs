@@ -85,6 +85,24 @@ pub const TRUTH: [(&str, &[&str]); 10] = [
     ("payload", &["payload_change"]),
 ];
 
+/// Pairs of physics effects that move one quantity the encoders see, so that one candidate
+/// stands for both and [`exactly_right`] (which asks for two) fails them whatever the
+/// diagnosis says: a sagging and a decaying battery are one drive gain falling over the run
+/// (`gain_drift`); a weak right amplifier and a larger right tyre are one right wheel acting
+/// weaker in transients (`amp_asymmetry`; [`TRUTH`]: the encoders cannot tell them apart).
+/// Reported as a group of its own beside every run, not taken out of the score.
+pub const ONE_QUANTITY: [(&str, &str); 2] = [
+    ("gain_sag", "gain_decay"),
+    ("amp_gain_right", "tyre_radius_right"),
+];
+
+/// Whether the true effects `truth` are an [`ONE_QUANTITY`] pair.
+pub fn one_quantity(truth: &[String]) -> bool {
+    ONE_QUANTITY.iter().any(|(a, b)| {
+        truth.len() == 2 && truth.iter().any(|t| t == a) && truth.iter().any(|t| t == b)
+    })
+}
+
 /// The physics effects, in [`TRUTH`] order.
 pub fn effect_names() -> Vec<&'static str> {
     TRUTH.iter().map(|(e, _)| *e).collect()

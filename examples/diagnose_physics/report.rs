@@ -262,6 +262,12 @@ pub fn report(recs: &[Record], wall_s: f64) -> String {
                 .filter(|r| r.kind == "pair" && r.masked.is_empty())
                 .collect(),
         ));
+        groups.push((
+            "… and of two quantities the encoders can tell apart (not ONE_QUANTITY)".into(),
+            recs.iter()
+                .filter(|r| r.kind == "pair" && r.masked.is_empty() && !one_quantity(&r.truth))
+                .collect(),
+        ));
     }
     for (name, g) in &groups {
         if !g.is_empty() {
