@@ -25,7 +25,12 @@
 # once at f2a8227 (1019's gain_decay+payload and 1020's Khepera clamps were then looked at);
 # 1021 (single, clean; pairs window_end) and clean 2471-2570 once at 649bfde (1021 then looked
 # at: its payload times led to 642172b); 1022 (single, clean; pairs window_end) and clean
-# 2571-2670 once at bab99f1; the next report takes 1023.. and 2671.. .
+# 2571-2670 once at bab99f1; 1023 (single, clean; pairs window_end) once at 937ce0a (the
+# effect-size rule for every effect) — its Pioneer latency pairs then led to d2fb45f (limits
+# left out of that rule), so 1023 is tuning now; clean 2671-2770 once at 937ce0a (d2fb45f
+# accepts a subset of what 937ce0a accepts: a clean run that named nothing there names
+# nothing now); 1024 (single, clean; pairs window_end) once at d2fb45f; the next report takes
+# 1025.. and 2771.. .
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions

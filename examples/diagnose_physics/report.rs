@@ -283,7 +283,7 @@ pub fn report(recs: &[Record], wall_s: f64) -> String {
         let _ = writeln!(
             out,
             "\nPairs with a masked effect (marginal visibility < {MASKED_PERCENT} % on both \
-             channels; counted above in every group but the last):\n"
+             channels; counted above in every group but the last two):\n"
         );
         for r in masked {
             let vis: Vec<String> = r
