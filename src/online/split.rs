@@ -411,4 +411,12 @@ impl ChannelRls {
             Form::Fixed(r, _) => r.changes(),
         }
     }
+
+    /// The change detector's alarm level (`Rls::alarm_level`).
+    pub(super) fn alarm_level(&self) -> f64 {
+        match &self.form {
+            Form::Free(r) => r.alarm_level(),
+            Form::Fixed(r, _) => r.alarm_level(),
+        }
+    }
 }
