@@ -87,8 +87,9 @@ pub struct OnlineSettings {
     /// The change detector (a payload put on or taken off): on an alarm the channel's
     /// covariance is reset and θ re-converges as from a fresh start.
     pub detection: Option<ChangeDetection>,
-    /// Seconds before a channel's detector arms (the estimate's first convergence) and
-    /// before it goes on in `form`, from the start or its last alarm \[s\].
+    /// Seconds of a channel's warm-up (the estimate's first convergence) before it goes on
+    /// in `form`, from the start or its last alarm; its change detector then learns for two
+    /// more before it arms (`wheelid_solvers::recursive`, "Change detection") \[s\].
     pub warmup_s: f64,
     /// The estimator after the warm-up (module docs).
     pub form: OnlineForm,
@@ -531,7 +532,7 @@ impl OnlineTheta {
         [self.rls[0].changes(), self.rls[1].changes()]
     }
 
-    /// The v and ω detectors' CUSUM alarm levels, h or more once calibrated on the warm-up
+    /// The v and ω detectors' CUSUM alarm levels, h or more once learned
     /// (`wheelid_solvers::recursive::ChangeDetection::calibration`); +∞ without detection.
     pub fn alarm_levels(&self) -> [f64; 2] {
         [self.rls[0].alarm_level(), self.rls[1].alarm_level()]

@@ -38,8 +38,8 @@
 //!
 //! **Change detection.** The squared innovation z_k = ε_k² λ/s_k has a steady mean σ̄² while
 //! θ holds. After its warm-up the detector learns, raising no alarm, for two more warm-ups:
-//! σ̄² as the plain mean of z over the first; then a one-sided CUSUM g_k = max(0, g_{k−1} + z_k/σ̄² − 1 − ν) over the second, its
-//! largest excursion g_max kept. Armed, g goes on against σ̄² (held) and raises an alarm at
+//! σ̄² as the plain mean of z over the first; then a one-sided CUSUM
+//! g_k = max(0, g_{k−1} + z_k/σ̄² − 1 − ν) over the second, its largest excursion g_max kept. Armed, g goes on against σ̄² (held) and raises an alarm at
 //! g_k > ĥ = max(h, c g_max) ([`ChangeDetection::calibration`]); then P is reset to P_0 (the
 //! estimate re-converges at the rate of a fresh start), g to 0, and no alarm is raised for a
 //! warm-up. ν ([`ChangeDetection::drift`]) and h ([`ChangeDetection::threshold`]) trade the
@@ -63,17 +63,19 @@ pub struct ChangeDetection {
     pub drift: f64,
     /// h: the CUSUM level that raises an alarm [-].
     pub threshold: f64,
-    /// Samples before the detector arms (the estimate's own convergence from its start).
+    /// Samples of the warm-up (the estimate's own convergence from its start); the detector
+    /// then learns for two more warm-ups before it arms, and waits one after each alarm.
     pub warmup: u64,
-    /// A normalised innovation enters σ̂² clipped at this many σ̂² [-].
+    /// A squared innovation enters the reported σ̂² ([`Rls::noise_variance`]) clipped at this
+    /// many σ̂² [-] (the detector's own reference is the plain mean it learned).
     pub clip: f64,
-    /// Forgetting factor of σ̂² (its memory in samples is 1/(1 − this)) [-].
+    /// Forgetting factor of the reported σ̂² (its memory in samples is 1/(1 − this)) [-].
     pub noise_forgetting: f64,
     /// c: the level that raises an alarm is max(h, c × the largest excursion of the CUSUM
     /// while it learns) [-] (module docs, "Change detection"; learning takes two more
-    /// `warmup`s after the warm-up). A real robot's innovations
-    /// come in bursts at every large command step where the model misses part of the
-    /// transient; a level below the bursts of a steady drive raises an alarm at every step.
+    /// `warmup`s after the warm-up). A real robot's innovations come in bursts at every
+    /// large command step where the model misses part of the transient; a level below the
+    /// bursts of a steady drive raises an alarm at every step.
     pub calibration: f64,
 }
 
