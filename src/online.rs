@@ -532,12 +532,6 @@ impl OnlineTheta {
         [self.rls[0].changes(), self.rls[1].changes()]
     }
 
-    /// The v and ω detectors' CUSUM alarm levels, h or more once learned
-    /// (`wheelid_solvers::recursive::ChangeDetection::calibration`); +∞ without detection.
-    pub fn alarm_levels(&self) -> [f64; 2] {
-        [self.rls[0].alarm_level(), self.rls[1].alarm_level()]
-    }
-
     /// The form after the warm-up: the settings' (module docs), but the instruments where the
     /// output-error form was asked for with the split free.
     pub fn form(&self) -> OnlineForm {

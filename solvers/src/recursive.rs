@@ -39,8 +39,8 @@
 //! **Change detection.** The squared innovation z_k = ε_k² λ/s_k has a steady mean σ̄² while
 //! θ holds. After its warm-up the detector learns, raising no alarm, for two more warm-ups:
 //! σ̄² as the plain mean of z over the first; then a one-sided CUSUM
-//! g_k = max(0, g_{k−1} + z_k/σ̄² − 1 − ν) over the second, its largest excursion g_max kept. Armed, g goes on against σ̄² (held) and raises an alarm at
-//! g_k > ĥ = max(h, c g_max) ([`ChangeDetection::calibration`]); then P is reset to P_0 (the
+//! g_k = max(0, g_{k−1} + z_k/σ̄² − 1 − ν) over the second, its largest excursion g_max kept.
+//! Armed, g goes on against σ̄² (held) and raises an alarm at g_k > ĥ = max(h, c g_max) ([`ChangeDetection::calibration`]); then P is reset to P_0 (the
 //! estimate re-converges at the rate of a fresh start), g to 0, and no alarm is raised for a
 //! warm-up. ν ([`ChangeDetection::drift`]) and h ([`ChangeDetection::threshold`]) trade the
 //! delay against false alarms. A real robot's one-step errors come in bursts at every command
@@ -147,8 +147,8 @@ pub struct Rls<const N: usize> {
     excursion: f64,
     /// σ̄²: the mean of z the detector learned, its CUSUM's reference (NaN before).
     reference: f64,
-    /// Σ z and the count while σ̄² is learned.
-    learned: (f64, f64),
+    /// Σ z while σ̄² is learned (over `warmup` samples: σ̄² = this / `warmup`).
+    learned: f64,
     /// The last sample of the quiet warm-up after an alarm (the estimate re-converging from
     /// P_0 is no change).
     quiet_until: u64,
@@ -278,7 +278,7 @@ impl<const N: usize> Rls<N> {
             cusum: 0.0,
             excursion: 0.0,
             reference: f64::NAN,
-            learned: (0.0, 0.0),
+            learned: 0.0,
             quiet_until: 0,
             samples: 0,
             changes: 0,
@@ -462,10 +462,9 @@ impl<const N: usize> Rls<N> {
         // excursion kept for the level. Armed, the CUSUM goes on against σ̄² (held).
         let (learned, armed) = (2 * d.warmup, 3 * d.warmup);
         if self.samples <= learned {
-            self.learned.0 += z;
-            self.learned.1 += 1.0;
+            self.learned += z;
             if self.samples == learned {
-                self.reference = self.learned.0 / self.learned.1;
+                self.reference = self.learned / d.warmup as f64;
             }
             return false;
         }
@@ -637,10 +636,10 @@ mod tests {
 
     /// A steady system whose errors come in bursts (every 200 samples, 10 samples of 20 times
     /// the noise: a model that misses part of each command step's transient, as on a real
-    /// robot): the detector calibrated on the second half of its 500-sample warm-up raises no
-    /// alarm, where the fixed level h = 60 raises one at nearly every burst; a step in θ (the
-    /// bursts going on) is still detected within 10 samples, and after it the detector waits
-    /// its warm-up again while the estimate re-converges (one alarm, not a cascade).
+    /// robot): the detector, having learned its reference and the bursts' excursion over the
+    /// two warm-ups after its own (500 samples each), raises no alarm, where the bare level
+    /// h = 60 (c = 0) raises more than 20; a step in θ (the bursts going on) is still caught
+    /// within 10 samples, and only once (no cascade while the estimate re-converges).
     #[test]
     fn bursts_of_a_steady_drive_raise_no_alarm_once_calibrated() {
         let run = |calibration: f64| {

@@ -138,6 +138,7 @@ pub(super) fn verdict(
     // scale-free, so it keeps its size on a residual a hundred times smaller (seen: a voltage
     // clamp fitted to 99.9 % in both channels, validation cost −100 %, refused at χ² = 20 —
     // the search itself stops at that fit, and the report names what stays).
+    let e_cur = frame.residuals(&cx.cur.sim);
     let practical = [after.v.fit_percent, after.w.fit_percent]
         .iter()
         .all(|f| *f >= PRACTICAL_FIT_PERCENT);
@@ -146,7 +147,7 @@ pub(super) fn verdict(
         && s.p_value * (n.pattern.grid as f64) < settings.alpha
         && s.stat > FINGERPRINT_LEFT * n.score.stat
         && !small_effect_left(c, &new, &n.pattern, &s.beta, data)
-        && !(limit_free(c) && small_share_left(s.explained, &frame.residuals(&cx.cur.sim), &e_new))
+        && !(limit_free(c) && small_share_left(s.explained, &e_cur, &e_new))
     {
         let base = new.theta.len() - c.params().len();
         let mut moved = new.theta.clone();
@@ -164,7 +165,7 @@ pub(super) fn verdict(
                 s.stat,
                 n.score.stat,
                 s.p_value,
-                100.0 * share_left(s.explained, &frame.residuals(&cx.cur.sim), &e_new),
+                100.0 * share_left(s.explained, &e_cur, &e_new),
                 100.0 * drop,
                 after.v.fit_percent,
                 after.w.fit_percent

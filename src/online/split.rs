@@ -345,9 +345,9 @@ impl ChannelRls {
         u: [f64; 2],
         n: f64,
     ) -> f64 {
-        let [a, b0, b1, c] = self.theta;
-        let offset = jittered.pole * y + jittered.forced;
-        offset + jittered.coupling * n - (a * y + b0 * u[0] + b1 * u[1] + c * n)
+        let (p, q) = self.step(Some(jittered), y, u);
+        let (p0, q0) = self.step(None, y, u);
+        p + q * n - (p0 + q0 * n)
     }
 
     /// The coefficients of the sampled equation's step at the current estimate over the periods
@@ -409,14 +409,6 @@ impl ChannelRls {
         match &self.form {
             Form::Free(r) => r.changes(),
             Form::Fixed(r, _) => r.changes(),
-        }
-    }
-
-    /// The change detector's alarm level (`Rls::alarm_level`).
-    pub(super) fn alarm_level(&self) -> f64 {
-        match &self.form {
-            Form::Free(r) => r.alarm_level(),
-            Form::Fixed(r, _) => r.alarm_level(),
         }
     }
 }
