@@ -63,8 +63,9 @@ pub struct ChangeDetection {
     pub drift: f64,
     /// h: the CUSUM level that raises an alarm [-].
     pub threshold: f64,
-    /// Samples of the warm-up (the estimate's own convergence from its start); the detector
-    /// then learns for two more warm-ups before it arms, and waits one after each alarm.
+    /// Samples of the warm-up (the estimate's own convergence from its start; ≥ 1); the
+    /// detector then learns for two more warm-ups before it arms, and waits one after each
+    /// alarm.
     pub warmup: u64,
     /// A squared innovation enters the reported σ̂² ([`Rls::noise_variance`]) clipped at this
     /// many σ̂² [-] (the detector's own reference is the plain mean it learned).
@@ -261,7 +262,8 @@ impl<const N: usize> Rls<N> {
                 && d.noise_forgetting > 0.0
                 && d.noise_forgetting < 1.0
                 && d.calibration >= 0.0
-                && d.calibration.is_finite())
+                && d.calibration.is_finite()
+                && d.warmup >= 1)
         {
             return bad(format!("change detection {d:?} is out of range"));
         }
@@ -830,6 +832,15 @@ mod tests {
             ..RlsSettings::default()
         }));
         assert!(Rls::<1>::new(RlsSettings::default(), [f64::NAN]).is_err());
+        // A detector learns its reference over its warm-ups: none is no detector (with 0 it
+        // raised an alarm from the first sample on).
+        assert!(bad(RlsSettings {
+            detection: Some(ChangeDetection {
+                warmup: 0,
+                ..ChangeDetection::default()
+            }),
+            ..RlsSettings::default()
+        }));
         let mut r = Rls::<1>::new(RlsSettings::default(), [0.0]).expect("valid");
         assert!(r.update(&[f64::NAN], 1.0).error.is_nan());
         assert_eq!(r.samples(), 0);
