@@ -173,7 +173,6 @@ pub fn draw_effects(
         .iter()
         .any(|e| matches!(*e, "rate_limit" | "voltage_clamp" | "floor_mu"));
     let dem = need_demand.then(|| demand(p, exc, spec.duration_s, None));
-    let dem = dem.as_ref();
     // Behind a rate limit a clamp or a floor is drawn from the demand the limit leaves.
     let mut limited: Option<Demand> = None;
     for &name in &spec.effects {
@@ -183,119 +182,153 @@ pub fn draw_effects(
             .with_context(|| format!("unknown physics effect {name}"))? as u64;
         let u = |k| uniform(spec.seed, stream, k);
         let mut m = BTreeMap::new();
-        match (name, dem) {
-            ("latency", _) => {
-                let periods = 0.5 + 2.5 * u(0);
-                fx.latency_s = Some(periods * p.period_s);
-                m.insert("latency_s".into(), periods * p.period_s);
-                m.insert("periods".into(), periods);
-            }
-            ("rate_limit", Some(d)) => {
-                let frac = 0.2 + 0.3 * u(0);
-                let (sv, sw) = (quantile(&d.slope_v, 0.95), quantile(&d.slope_w, 0.95));
-                let (a_v, a_w) = (frac * sv, frac * sw);
-                fx.rate_limit = Some(RateLimit {
-                    v_accel: a_v,
-                    w_accel: a_w,
-                });
-                m.insert("v_accel".into(), a_v);
-                m.insert("w_accel".into(), a_w);
-                m.insert("fraction_of_p95_slope".into(), frac);
-                m.insert("binds_share_v".into(), share_above(&d.slope_v, a_v));
-                m.insert("binds_share_w".into(), share_above(&d.slope_w, a_w));
-            }
-            ("voltage_clamp", Some(d)) => {
-                let d = match fx.rate_limit {
-                    Some(r) => &*limited.get_or_insert_with(|| {
+        let drawn = match dem.as_ref() {
+            Some(d) if matches!(name, "rate_limit" | "voltage_clamp" | "floor_mu") => {
+                let d = match (name, fx.rate_limit) {
+                    ("rate_limit", _) | (_, None) => d,
+                    (_, Some(r)) => &*limited.get_or_insert_with(|| {
                         demand(p, exc, spec.duration_s, Some((r.v_accel, r.w_accel)))
                     }),
-                    None => d,
                 };
-                let q = 0.80 + 0.15 * u(0);
-                let volts = quantile(&d.volts, q);
-                fx.voltage_clamp = Some(volts);
-                m.insert("volts".into(), volts);
-                // In the effort_clamp's units (its module docs): V r/k_P, V/K_PT.
-                let effort = match p.controller {
-                    Controller::WheelPd { k_p, .. } => volts * p.r / k_p,
-                    Controller::VwPd { k_pt, .. } => volts / k_pt,
-                };
-                m.insert("effort_max".into(), effort);
-                m.insert("quantile".into(), q);
-                m.insert("binds_share".into(), share_above(&d.volts, volts));
+                draw_demanded(name, p, d, &u, &mut fx, &mut m)
             }
-            ("gain_sag", _) => {
-                let f = 0.1 + 0.2 * u(0);
-                fx.gain_sag = Some(f);
-                m.insert("fraction".into(), f);
-                m.insert("rate_per_s".into(), -f / spec.duration_s);
-            }
-            ("gain_decay", _) => {
-                let f = 0.1 + 0.2 * u(0);
-                let tau = spec.duration_s / -(1.0 - f).ln();
-                fx.gain_decay_tau_s = Some(tau);
-                m.insert("tau_s".into(), tau);
-                m.insert("fraction_lost".into(), f);
-                // The mean rate over the run (a straight line through e^(−t/τ)'s ends).
-                m.insert("rate_per_s".into(), -f / spec.duration_s);
-            }
-            ("amp_gain_right", _) => {
-                let g = if u(1) < 0.5 {
-                    0.90 + 0.05 * u(0)
-                } else {
-                    1.05 + 0.05 * u(0)
-                };
-                fx.amp_gain_right = Some(g);
-                m.insert("gain".into(), g);
-            }
-            ("tyre_radius_right", _) => {
-                let f = 1.02 + 0.03 * u(0);
-                fx.tyre_radius_right = Some(f);
-                m.insert("factor".into(), f);
-            }
-            ("dry_friction", _) => {
-                let share = 0.03 + 0.07 * u(0);
-                let (dv, dw) = friction_loss_per_nm(p);
-                let f = share * 0.3 * p.v_max / dv;
-                fx.dry_friction_nm = Some(f);
-                m.insert("torque_nm".into(), f);
-                m.insert("loss_share_of_v_amp".into(), share);
-                m.insert("steady_loss_v".into(), f * dv);
-                m.insert("steady_loss_w".into(), f * dw);
-            }
-            ("floor_mu", Some(d)) => {
-                let d = match fx.rate_limit {
-                    Some(r) => &*limited.get_or_insert_with(|| {
-                        demand(p, exc, spec.duration_s, Some((r.v_accel, r.w_accel)))
-                    }),
-                    None => d,
-                };
-                let frac = 0.4 + 0.2 * u(0);
-                let mu = frac * quantile(&d.mu, 0.95);
-                fx.floor_mu = Some(mu);
-                m.insert("mu".into(), mu);
-                m.insert("fraction_of_p95_demand".into(), frac);
-                m.insert("slips_share".into(), share_above(&d.mu, mu));
-            }
-            ("payload", _) => {
-                let pl = Payload {
-                    mass_kg: (0.3 + 0.7 * u(0)) * p.m,
-                    at_s: (0.3 + 0.4 * u(1)) * spec.duration_s,
-                    x_m: (0.25 + 0.5 * u(2)) * p.caster_x,
-                    size_m: p.d / 3.0,
-                };
-                fx.payload = Some(pl);
-                m.insert("mass_kg".into(), pl.mass_kg);
-                m.insert("at_s".into(), pl.at_s);
-                m.insert("x_m".into(), pl.x_m);
-                m.insert("size_m".into(), pl.size_m);
-                m.insert("theta1_loaded_map".into(), pl.loaded(p).theta()[0]);
-            }
-            _ => bail!("unknown physics effect {name}"),
+            _ => draw_plain(name, p, spec.duration_s, &u, &mut fx, &mut m),
+        };
+        if !drawn {
+            bail!("unknown physics effect {name}");
         }
         params.insert(name.to_string(), m);
     }
     Ok((fx, params))
+}
+
+/// Draws a rate limit, voltage clamp or floor friction `name` (table of [`draw_effects`]) from
+/// the demand `d` (for a clamp or a floor behind a rate limit, the demand the limit leaves) and
+/// the uniform draws `u`, into `fx` and its reported magnitudes `m`; false for another name.
+fn draw_demanded(
+    name: &str,
+    p: &PhysicalProfile,
+    d: &Demand,
+    u: &dyn Fn(u64) -> f64,
+    fx: &mut PhysicsEffects,
+    m: &mut BTreeMap<String, f64>,
+) -> bool {
+    match name {
+        "rate_limit" => {
+            let frac = 0.2 + 0.3 * u(0);
+            let (sv, sw) = (quantile(&d.slope_v, 0.95), quantile(&d.slope_w, 0.95));
+            let (a_v, a_w) = (frac * sv, frac * sw);
+            fx.rate_limit = Some(RateLimit {
+                v_accel: a_v,
+                w_accel: a_w,
+            });
+            m.insert("v_accel".into(), a_v);
+            m.insert("w_accel".into(), a_w);
+            m.insert("fraction_of_p95_slope".into(), frac);
+            m.insert("binds_share_v".into(), share_above(&d.slope_v, a_v));
+            m.insert("binds_share_w".into(), share_above(&d.slope_w, a_w));
+        }
+        "voltage_clamp" => {
+            let q = 0.80 + 0.15 * u(0);
+            let volts = quantile(&d.volts, q);
+            fx.voltage_clamp = Some(volts);
+            m.insert("volts".into(), volts);
+            // In the effort_clamp's units (its module docs): V r/k_P, V/K_PT.
+            let effort = match p.controller {
+                Controller::WheelPd { k_p, .. } => volts * p.r / k_p,
+                Controller::VwPd { k_pt, .. } => volts / k_pt,
+            };
+            m.insert("effort_max".into(), effort);
+            m.insert("quantile".into(), q);
+            m.insert("binds_share".into(), share_above(&d.volts, volts));
+        }
+        "floor_mu" => {
+            let frac = 0.4 + 0.2 * u(0);
+            let mu = frac * quantile(&d.mu, 0.95);
+            fx.floor_mu = Some(mu);
+            m.insert("mu".into(), mu);
+            m.insert("fraction_of_p95_demand".into(), frac);
+            m.insert("slips_share".into(), share_above(&d.mu, mu));
+        }
+        _ => return false,
+    }
+    true
+}
+
+/// Draws physics effect `name` that needs no demand (table of [`draw_effects`]) for a run of
+/// `duration_s` \[s\] from the uniform draws `u`, into `fx` and its reported magnitudes `m`;
+/// false for another name.
+fn draw_plain(
+    name: &str,
+    p: &PhysicalProfile,
+    duration_s: f64,
+    u: &dyn Fn(u64) -> f64,
+    fx: &mut PhysicsEffects,
+    m: &mut BTreeMap<String, f64>,
+) -> bool {
+    match name {
+        "latency" => {
+            let periods = 0.5 + 2.5 * u(0);
+            fx.latency_s = Some(periods * p.period_s);
+            m.insert("latency_s".into(), periods * p.period_s);
+            m.insert("periods".into(), periods);
+        }
+        "gain_sag" => {
+            let f = 0.1 + 0.2 * u(0);
+            fx.gain_sag = Some(f);
+            m.insert("fraction".into(), f);
+            m.insert("rate_per_s".into(), -f / duration_s);
+        }
+        "gain_decay" => {
+            let f = 0.1 + 0.2 * u(0);
+            let tau = duration_s / -(1.0 - f).ln();
+            fx.gain_decay_tau_s = Some(tau);
+            m.insert("tau_s".into(), tau);
+            m.insert("fraction_lost".into(), f);
+            // The mean rate over the run (a straight line through e^(−t/τ)'s ends).
+            m.insert("rate_per_s".into(), -f / duration_s);
+        }
+        "amp_gain_right" => {
+            let g = if u(1) < 0.5 {
+                0.90 + 0.05 * u(0)
+            } else {
+                1.05 + 0.05 * u(0)
+            };
+            fx.amp_gain_right = Some(g);
+            m.insert("gain".into(), g);
+        }
+        "tyre_radius_right" => {
+            let f = 1.02 + 0.03 * u(0);
+            fx.tyre_radius_right = Some(f);
+            m.insert("factor".into(), f);
+        }
+        "dry_friction" => {
+            let share = 0.03 + 0.07 * u(0);
+            let (dv, dw) = friction_loss_per_nm(p);
+            let f = share * 0.3 * p.v_max / dv;
+            fx.dry_friction_nm = Some(f);
+            m.insert("torque_nm".into(), f);
+            m.insert("loss_share_of_v_amp".into(), share);
+            m.insert("steady_loss_v".into(), f * dv);
+            m.insert("steady_loss_w".into(), f * dw);
+        }
+        "payload" => {
+            let pl = Payload {
+                mass_kg: (0.3 + 0.7 * u(0)) * p.m,
+                at_s: (0.3 + 0.4 * u(1)) * duration_s,
+                x_m: (0.25 + 0.5 * u(2)) * p.caster_x,
+                size_m: p.d / 3.0,
+            };
+            fx.payload = Some(pl);
+            m.insert("mass_kg".into(), pl.mass_kg);
+            m.insert("at_s".into(), pl.at_s);
+            m.insert("x_m".into(), pl.x_m);
+            m.insert("size_m".into(), pl.size_m);
+            m.insert("theta1_loaded_map".into(), pl.loaded(p).theta()[0]);
+        }
+        _ => return false,
+    }
+    true
 }
 
 /// Magnitude comparisons for every true effect of a run: latency vs `delay_s`; rate limits vs
