@@ -13,8 +13,9 @@ use wheelid::robots::physics::{PhysicalProfile, PhysicsSettings, simulate_physic
 use wheelid::solvers::Ols;
 use wheelid_core::{RegressorModel, Timing};
 
-/// Seeds (env `WHEELID_DESIGN_SEEDS`; CI's sample 6, the full proof 20:
-/// `WHEELID_DESIGN_SEEDS=20 cargo test --release --test design -- --include-ignored`).
+/// Seeds (env `WHEELID_DESIGN_SEEDS`; CI's sample 6; 20 for the issue's figure; the spread's
+/// proof 80: `scripts/design_spread.sh`, i.e. `WHEELID_DESIGN_SEEDS=80
+/// WHEELID_DESIGN_FIRST_SEED=41 cargo test --release --test design -- a_designed_drive`).
 fn seeds() -> u64 {
     std::env::var("WHEELID_DESIGN_SEEDS")
         .ok()
@@ -98,17 +99,17 @@ fn settings(p: &PhysicalProfile, wheel_noise: f64) -> DesignSettings {
 
 /// The prediction where eq. 2.19 holds exactly: the design `d` driven on the eq.-2.19
 /// simulator with the map's θ and the same white noise `noise_std` on v, ω (no encoder
-/// model), over the seeds; asserts within 2 % on every seed and, on 20 seeds or more, the
-/// spread within 30 % of the prediction. Measured on seeds 21–40 for the Pioneer-like robot:
-/// 0.76/0.88/1.09/1.04 for θ1, θ2, θ4, θ6, where its rigid-body twin gives 0.90/0.81/0.85/0.67
-/// — the prediction is the model's output-error Cramér–Rao bound, and the rigid-body robot's
-/// departure from eq. 2.19 (θ6 biased +0.31 %) shrinks θ6's spread below it.
+/// model), over the seeds; asserts within 2 % on every seed and returns the spread / predicted
+/// ratio of θ1, θ2, θ4, θ6 (the caller judges them by [`spread_band`] once every figure is
+/// printed). The prediction is the model's output-error Cramér–Rao bound: here it holds
+/// exactly but for the fit's own errors, so the ratios show how far 20 seeds read it (README:
+/// 0.61–1.65 over five windows of 20 seeds).
 fn eq_2_19_spread(
     p: &PhysicalProfile,
     model: &dyn RegressorModel,
     d: &wheelid::design::Design,
     noise_std: [f64; 2],
-) {
+) -> [(usize, f64); 4] {
     use wheelid::robots::effects::MeasurementNoise;
     use wheelid::robots::{SimSettings, simulate_recording};
     let robot = p.model_profile();
@@ -128,27 +129,72 @@ fn eq_2_19_spread(
             identified(&rec, model)
         })
         .collect();
-    for i in [0, 1, 3, 5] {
-        let truth = p.theta()[i];
-        let (_, sd) = spread(&thetas, i);
-        let ratio = sd / d.predicted_std_err[i];
+    let ratios = [0, 1, 3, 5].map(|i| {
+        let ratio = spread(&thetas, i).1 / d.predicted_std_err[i];
         eprintln!(
             "  eq. 2.19 simulator: θ{}: spread / predicted {ratio:.2}",
             i + 1
         );
+        (i, ratio)
+    });
+    for (i, _) in ratios {
+        let truth = p.theta()[i];
         for t in &thetas {
             assert!(((t[i] - truth) / truth).abs() < 0.02, "θ{}", i + 1);
         }
-        if seeds() >= 20 {
-            assert!((ratio - 1.0).abs() <= 0.3, "θ{}: {ratio:.2}", i + 1);
-        }
     }
+    ratios
+}
+
+/// The band in which the spread / predicted ratio of `n` seeds lies for an exact prediction
+/// but one time in a thousand, widened to the issue's ±30 %: the two-sided 99.9 % band of
+/// s/σ = √(χ²ₖ/k), k = n − 1 (Wilson–Hilferty: χ²ₖ/k ≈ (1 − 2/(9k) + z √(2/(9k)))³, z =
+/// 3.29). At 20 seeds it is 0.50–1.56: a sample of 20 reads an exact prediction outside
+/// ±30 % with P ≈ 0.06 a ratio, on one of θ1, θ2, θ4, θ6 about one time in four, so ±30 % there
+/// would be a test that fails by chance; from 65 seeds on the band lies inside ±30 %, and ±30 %
+/// is what is asserted (`scripts/design_spread.sh` runs 80).
+fn spread_band(n: u64) -> (f64, f64) {
+    let k = n.saturating_sub(1).max(1) as f64;
+    let c = 2.0 / (9.0 * k);
+    let q = |z: f64| (1.0 - c + z * c.sqrt()).max(0.0).powi(3).sqrt();
+    (q(-3.29).min(0.7), q(3.29).max(1.3))
+}
+
+/// On 20 seeds or more, θ`i+1`'s spread / predicted `ratio` within [`spread_band`] (6 are too
+/// few to judge a spread).
+fn assert_spread(i: usize, ratio: f64) {
+    if seeds() >= 20 {
+        let (lo, hi) = spread_band(seeds());
+        assert!(
+            (lo..=hi).contains(&ratio),
+            "θ{}: spread / predicted {ratio:.2} outside {lo:.2}–{hi:.2} ({} seeds)",
+            i + 1,
+            seeds()
+        );
+    }
+}
+
+/// [`spread_band`]'s Wilson–Hilferty quantile against the χ² table (19 degrees of freedom:
+/// 2.5 % and 97.5 % quantiles 8.907 and 32.852), and its band at 20 and 80 seeds.
+#[test]
+fn the_spread_band_follows_the_chi_square_table() {
+    let k = 19.0;
+    let c = 2.0 / (9.0 * k);
+    let q = |z: f64| k * (1.0 - c + z * f64::sqrt(c)).powi(3);
+    assert!((q(-1.96) / 8.907 - 1.0).abs() < 0.005, "{}", q(-1.96));
+    assert!((q(1.96) / 32.852 - 1.0).abs() < 0.005, "{}", q(1.96));
+    let (lo, hi) = spread_band(20);
+    assert!(
+        (lo - 0.50).abs() < 0.01 && (hi - 1.56).abs() < 0.01,
+        "{lo} {hi}"
+    );
+    assert_eq!(spread_band(80), (0.7, 1.3));
 }
 
 /// Designs for `name`, drives the design and the thesis's signal of the same length over the
 /// seeds; asserts θ1, θ2, θ4, θ6 within 2 % on every seed in ≤ 45 s inside a 3 m × 3 m space,
-/// and prints the spread against the predicted standard errors (the 30 % goal is read on the
-/// full 20 seeds; 6 are too few to judge a spread).
+/// and the spread against the predicted standard errors within [`spread_band`] on 20 seeds or
+/// more (6 are too few to judge a spread; ±30 % from 65 seeds on).
 fn designed_drive(name: &str) {
     let wheel_noise = 0.01;
     {
@@ -156,7 +202,7 @@ fn designed_drive(name: &str) {
         let model = models::by_name(p.model_name()).expect("model");
         let s = settings(&p, wheel_noise);
         let d = design(model.as_ref(), &s).expect("designs");
-        eq_2_19_spread(&p, model.as_ref(), &d, s.noise_std);
+        let twin = eq_2_19_spread(&p, model.as_ref(), &d, s.noise_std);
         eprintln!(
             "{name}: {} s on lines to {:.2} Hz, predicted se {:.5?}, extent {:.2?} m, {} \
              candidates",
@@ -175,6 +221,7 @@ fn designed_drive(name: &str) {
             Excitation::thesis_pioneer()
         };
         let (th_thesis, _) = drive(&p, model.as_ref(), &thesis, d.duration_s, wheel_noise);
+        let mut ratios = Vec::new();
         for i in [0, 1, 3, 5] {
             let truth = p.theta()[i];
             let worst = |ts: &[Vec<f64>]| {
@@ -198,14 +245,11 @@ fn designed_drive(name: &str) {
                 d.predicted_std_err[i]
             );
             assert!(worst(&thetas) < 2.0, "θ{}", i + 1);
-            // The spread against the prediction is read on 20 seeds or more (6 are too few).
-            if seeds() >= 20 {
-                assert!(
-                    (ratio - 1.0).abs() <= 0.3,
-                    "θ{}: spread / predicted {ratio:.2}",
-                    i + 1
-                );
-            }
+            ratios.push((i, ratio));
+        }
+        // Both spreads are judged once every figure is printed.
+        for (i, ratio) in twin.into_iter().chain(ratios) {
+            assert_spread(i, ratio);
         }
     }
 }
