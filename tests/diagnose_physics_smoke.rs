@@ -121,6 +121,12 @@ fn a_pioneer_on_a_slippery_floor_is_named_traction_limit() {
     assert!(r.error.is_none(), "{:?}", r.error);
     assert_eq!(r.named, ["traction_limit"]);
     assert!(r.fit_final.v >= 95.0 && r.fit_final.w >= 95.0);
+    // The nominal fit cannot follow it: its residual stands above the noise floor.
+    assert!(
+        r.noise_ratio_nominal[0] > 1.0,
+        "{:?}",
+        r.noise_ratio_nominal
+    );
     let mu = r.truth_params["floor_mu"]["mu"];
     let a = r.named_params["traction_limit"]["accel_max"];
     let p = wheelid::robots::physics::PhysicalProfile::pioneer3dx();

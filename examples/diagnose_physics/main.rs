@@ -247,6 +247,9 @@ pub struct Record {
     pub exactly_right: bool,
     /// Nominal model's validation fit.
     pub fit_nominal: Fits,
+    /// The nominal model's validation residual RMS over the noise floor, (v, ω) (the
+    /// diagnosis's `noise_ratio`; at most 1: θ has absorbed the effect down to the noise).
+    pub noise_ratio_nominal: [f64; 2],
     /// Final model's validation fit.
     pub fit_final: Fits,
     /// Magnitude comparisons, one or more per true effect.
@@ -400,6 +403,7 @@ pub fn run_one(spec: &RunSpec, cache: &CleanRuns) -> Record {
         unexplained: None,
         exactly_right: false,
         fit_nominal: Fits::default(),
+        noise_ratio_nominal: [f64::NAN; 2],
         fit_final: Fits::default(),
         magnitudes: Vec::new(),
         visibility: Fits::default(),
@@ -509,6 +513,10 @@ fn run_into(spec: &RunSpec, cache: &CleanRuns, rec: &mut Record) -> Result<()> {
         v: d.nominal.channels.v.fit_percent,
         w: d.nominal.channels.w.fit_percent,
     };
+    rec.noise_ratio_nominal = [
+        d.nominal.channels.v.noise_ratio,
+        d.nominal.channels.w.noise_ratio,
+    ];
     rec.fit_final = Fits {
         v: d.final_stage.channels.v.fit_percent,
         w: d.final_stage.channels.w.fit_percent,

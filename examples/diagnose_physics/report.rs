@@ -255,6 +255,16 @@ pub fn report(recs: &[Record], wall_s: f64) -> String {
         "physically realised runs".into(),
         recs.iter().filter(|r| !r.unphysical).collect(),
     ));
+    if recs.iter().any(|r| r.kind == "single") {
+        groups.push((
+            "single effects that leave the nominal residual above the noise floor (> 1×) on a \
+             channel"
+                .into(),
+            recs.iter()
+                .filter(|r| r.kind == "single" && r.noise_ratio_nominal.iter().any(|&x| x > 1.0))
+                .collect(),
+        ));
+    }
     if recs.iter().any(|r| r.kind == "pair") {
         groups.push((
             format!("pairs where both effects act (marginal visibility ≥ {MASKED_PERCENT} %)"),
