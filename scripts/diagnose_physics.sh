@@ -29,8 +29,9 @@
 # effect-size rule for every effect) — its Pioneer latency pairs then led to d2fb45f (limits
 # left out of that rule), so 1023 is tuning now; clean 2671-2770 once at 937ce0a (d2fb45f
 # accepts a subset of what 937ce0a accepts: a clean run that named nothing there names
-# nothing now); 1024 (single, clean; pairs window_end) once at d2fb45f; the next report takes
-# 1025.. and 2771.. .
+# nothing now); 1024 (single, clean; pairs window_end) once at d2fb45f; 1025 (single, clean;
+# pairs window_end) once at 9f514dd (d2fb45f's method); the next report takes 1026.. and
+# 2771.. .
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
