@@ -30,8 +30,9 @@
 # left out of that rule), so 1023 is tuning now; clean 2671-2770 once at 937ce0a (d2fb45f
 # accepts a subset of what 937ce0a accepts: a clean run that named nothing there names
 # nothing now); 1024 (single, clean; pairs window_end) once at d2fb45f; 1025 (single, clean;
-# pairs window_end) once at 9f514dd (d2fb45f's method); the next report takes 1026.. and
-# 2771.. .
+# pairs window_end) once at 9f514dd (d2fb45f's method), then looked at; 1026 (single, clean;
+# pairs window_end) and clean 2771-2870 once at d64710a (limits in the effect-size rule); the
+# next report takes 1027.. and 2871.. .
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
