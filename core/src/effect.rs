@@ -166,6 +166,14 @@ pub enum Search {
     ChangeTime,
 }
 
+impl Search {
+    /// Whether this is [`Search::Limit`] (a setpoint rate limit or not): a level read off the
+    /// data, whose fit the diagnosis starts, judges and continues apart from the others.
+    pub fn is_limit(self) -> bool {
+        matches!(self, Self::Limit { .. })
+    }
+}
+
 /// How an effect's fingerprint (the score test's pattern) is probed at its null.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Probe {

@@ -170,8 +170,7 @@ pub(super) fn verdict(
                 after.v.fit_percent,
                 after.w.fit_percent
             ),
-            continue_from: (!matches!(c.effect().search(), Search::Limit { .. }))
-                .then_some((moved, new.pinned.clone())),
+            continue_from: (!c.effect().search().is_limit()).then_some((moved, new.pinned.clone())),
         });
     }
     Ok((new, after, drop))
@@ -192,7 +191,7 @@ fn small_effect_left(
     beta_left: &[f64],
     data: &Data,
 ) -> bool {
-    if matches!(c.effect().search(), Search::Limit { .. }) {
+    if c.effect().search().is_limit() {
         return beta_left.iter().all(|b| b.abs() <= EFFECT_LEFT);
     }
     let base = new.theta.len() - c.params().len();
@@ -241,7 +240,7 @@ fn small_share_left(
     before: &nalgebra::DVector<f64>,
     after: &nalgebra::DVector<f64>,
 ) -> bool {
-    let largest = if matches!(c.effect().search(), Search::Limit { .. }) {
+    let largest = if c.effect().search().is_limit() {
         SHARE_LEFT_LIMIT
     } else {
         SHARE_LEFT

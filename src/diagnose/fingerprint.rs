@@ -162,7 +162,7 @@ pub(super) fn fingerprint(
             pattern.inactive = (0..2).filter(|j| !active.contains(j)).collect();
         }
         // First guess: the probe level, or one Gauss–Newton step from the null.
-        if !matches!(c.effect().search(), Search::Limit { .. }) {
+        if !c.effect().search().is_limit() {
             for (col, &j) in pattern.param_of_col.iter().enumerate() {
                 pattern.guess[j] += s.beta[col];
             }

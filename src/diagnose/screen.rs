@@ -72,7 +72,7 @@ pub(super) fn start_candidate(
         theta = joint;
     }
     // A limit's probe level is a rough reading of the data: scaled on a grid first.
-    if matches!(search, Search::Limit { .. }) {
+    if search.is_limit() {
         // The probed levels only (a limit may have a parameter that is no level, as a mix).
         let active: Vec<usize> = (nominee.pattern.param_of_col.iter().copied())
             .filter(|j| !nominee.pattern.inactive.contains(j))
