@@ -462,10 +462,10 @@ impl<const N: usize> Rls<N> {
         // Learning, two more warm-ups, no alarm: the reference σ̄²,
         // the plain mean of z (bursts and all); then the CUSUM on z/σ̄² − 1 − ν, its largest
         // excursion kept for the level. Armed, the CUSUM goes on against σ̄² (held).
-        let (learned, armed) = (2 * d.warmup, 3 * d.warmup);
-        if self.samples <= learned {
+        let (reference_known, armed) = (2 * d.warmup, 3 * d.warmup);
+        if self.samples <= reference_known {
             self.learned += z;
-            if self.samples == learned {
+            if self.samples == reference_known {
                 self.reference = self.learned / d.warmup as f64;
             }
             return false;
