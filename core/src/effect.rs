@@ -208,6 +208,11 @@ pub struct ProbeData<'a> {
     pub accel: &'a [[Vec<f64>; 2]],
     /// θ1…θ6 of the model in hand.
     pub theta: &'a [f64],
+    /// The model in hand's free-run outputs (v̂ [m/s], ω̂ [rad/s]) per recording, on its
+    /// samples, where it extends eq. 2.19 by effects found before: what that model asks of the
+    /// robot (a rate limit in it shapes the commands before they reach the wheels). `None` for
+    /// eq. 2.19 alone, whose accelerations are read in closed form at the measured speeds.
+    pub simulated: Option<&'a [[Vec<f64>; 2]]>,
     /// Sample period \[s\].
     pub dt: f64,
     /// Wheel track d \[m\], if known.

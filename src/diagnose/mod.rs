@@ -22,8 +22,8 @@
 //! 3. **locate** — per channel, the residual by lag, frequency band, operating region and time
 //!    window (`locate`);
 //! 4. **name** — the candidates whose fingerprint survives the correction are nominated (when
-//!    none does but a residual is above the noise floor: those significant on their own), the
-//!    strongest first — every effect of `wheelid_models::effects::EFFECTS` (`input_delay`,
+//!    none does but a residual is above the noise floor, or the model in hand leaves what
+//!    step 5 would report as unexplained: the three strongest, p < 0.5), the strongest first — every effect of `wheelid_models::effects::EFFECTS` (`input_delay`,
 //!    `acceleration_limit`, `velocity_saturation`, `coulomb_friction`, `wheel_asymmetry`,
 //!    `payload_change`, `gain_drift`, `slip`, `wheel_friction`, `effort_clamp`,
 //!    `amp_asymmetry`, `traction_limit`, `tyre_asymmetry`). A two-channel candidate acts on the channels whose own pattern is
@@ -42,7 +42,8 @@
 //!    hundred times smaller). The first candidate that passes and up to two more (those
 //!    whose screened start's training cost is within three times the first's; never a
 //!    candidate fitted by differences, which is fitted only where its start already lowers the
-//!    training cost by `min_improvement`) compete on Akaike's criterion over the validation
+//!    training cost by `min_improvement`, or at all where the model in hand leaves a channel
+//!    above the noise floor) compete on Akaike's criterion over the validation
 //!    blocks, n_eff ln(J₁/J₀) + 2k, n_eff discounted for the residual's lag-1
 //!    autocorrelation. A change time (`payload_change`) is placed by a scan of the training
 //!    cost; its interval is the profile likelihood's 95 % one, n_eff ln(J(t)/J_min) ≤ χ²₁.

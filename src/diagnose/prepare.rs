@@ -224,12 +224,17 @@ pub(super) fn track_from_meta(rec: &Recording) -> Option<f64> {
 
 impl Data {
     /// What an effect's probe reads of the data ([`wheelid_core::effect::Effect::probe`]), at
-    /// the nominal θ `th6`.
-    pub(super) fn probe_data<'a>(&'a self, th6: &'a [f64]) -> ProbeData<'a> {
+    /// the model in hand's θ1…θ6 `th6` and, where it has effects, its free-run outputs `sim`.
+    pub(super) fn probe_data<'a>(
+        &'a self,
+        th6: &'a [f64],
+        sim: Option<&'a Outputs>,
+    ) -> ProbeData<'a> {
         ProbeData {
             recordings: &self.recs,
             accel: &self.accel,
             theta: th6,
+            simulated: sim.map(|s| s.as_slice()),
             dt: self.dt,
             track: self.track,
         }

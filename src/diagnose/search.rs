@@ -92,10 +92,11 @@ fn test_round(
                 count = distinct(&net, &nominated);
             }
         }
-    } else if above_floor(data, cur).iter().any(|&a| a) {
-        // A residual well above the noise floor is a mismatch whatever the family says: then
-        // the FLOOR_NOMINEES distinct fingerprints with the smallest p-values are fitted
-        // (validation evidence and the information criterion still decide).
+    } else if above_floor(data, cur).iter().any(|&a| a) || structure_left(data, cur, here, alpha) {
+        // A residual well above the noise floor is a mismatch whatever the family says, and
+        // so is one the report would call unexplained: then the FLOOR_NOMINEES distinct
+        // fingerprints with the smallest p-values are fitted (validation evidence and the
+        // information criterion still decide).
         let net = net_patterns(&nominees, &q);
         for &i in &by_p {
             if distinct(&net, &nominated) >= FLOOR_NOMINEES {
@@ -121,6 +122,21 @@ pub(super) fn above_floor(data: &Data, cur: &Current) -> [bool; 2] {
     [fits.v, fits.w].map(|c| {
         (c.fit_percent.is_nan() || c.fit_percent < PRACTICAL_FIT_PERCENT)
             && c.noise_ratio > NOISE_FLOOR_FACTOR
+    })
+}
+
+/// Whether the model in hand leaves what the report calls unexplained structure
+/// ([`super::assemble`]): a channel whose residual still depends on the commands (Holm over
+/// `here`'s independence tests at `alpha`) while its fit beyond the noise floor
+/// ([`ChannelFit::noise_corrected_fit_percent`]) is below
+/// [`PRACTICAL_FIT_PERCENT`]. A weak voltage clamp beside a stronger effect leaves this after
+/// the stronger one is fitted, with no fingerprint significant over the family.
+fn structure_left(data: &Data, cur: &Current, here: &Location, alpha: f64) -> bool {
+    let left = holm(&here.p_values(), alpha);
+    let (fits, _) = data.validate_on(&cur.sim, &data.judged(&[cur]));
+    [fits.v, fits.w].iter().enumerate().any(|(c, f)| {
+        let beyond = f.noise_corrected_fit_percent;
+        (left[2 * c] || left[2 * c + 1]) && (beyond.is_nan() || beyond < PRACTICAL_FIT_PERCENT)
     })
 }
 
@@ -285,13 +301,14 @@ fn first_accepted(
     let mut more = 0;
     let mut first_start = f64::INFINITY;
     let now = data.frame().residuals(&cur.sim).norm_squared();
+    let misfit = above_floor(data, cur).iter().any(|&a| a);
     for (i, st) in ready {
         let c = round.nominees[i].pattern.candidate;
         if best.is_some() && more == MORE_FITS {
             break;
         }
         let accepted = best.is_some().then_some(first_start);
-        if let Some(reason) = not_fitted(c, st.cost, now, accepted, settings) {
+        if let Some(reason) = not_fitted(c, (st.cost, now), accepted, misfit, settings) {
             rejected.push(Rejected {
                 effect: c.name().into(),
                 reason,
@@ -369,21 +386,32 @@ fn outscored(c: Candidate, score: f64, winner: &Accepted, best: f64) -> Rejected
 
 /// Why candidate `c`, whose screened start's training cost is `start` (the current model's:
 /// `now`), is not fitted in this round, if it is not: a model fitted by differences whose
-/// start does not already lower the cost by `min_improvement`, or a rival (the first accepted
-/// candidate's start cost `accepted`) outside [`RIVAL_START_FACTOR`] or fitted by differences.
+/// start does not already lower the cost by `min_improvement` — or, where the current model
+/// leaves a channel above the noise floor (`misfit`, [`above_floor`]), does not lower it at
+/// all — or a rival (the first accepted candidate's start cost `accepted`) outside
+/// [`RIVAL_START_FACTOR`] or fitted by differences.
 fn not_fitted(
     c: Candidate,
-    start: f64,
-    now: f64,
+    (start, now): (f64, f64),
     accepted: Option<f64>,
+    misfit: bool,
     settings: &DiagnoseSettings,
 ) -> Option<String> {
     let differenced = c.effect().differenced();
     let gain = 1.0 - start / now;
-    if differenced && (gain.is_nan() || gain < settings.min_improvement) {
+    // A traction limit behind a rate limit binds only where the limited setpoint still
+    // outruns the floor: its probed start lowers the cost by 0.5–4.8 % on the tuning seeds'
+    // missed pairs, where the model in hand leaves ω at 73–84 % (fitted: 96–99 %).
+    let enough = if misfit {
+        gain > 0.0
+    } else {
+        gain >= settings.min_improvement
+    };
+    if differenced && !enough {
         return Some(format!(
             "not fitted: its screened start changes the training cost by {:+.1} % (a model \
-             fitted by differences is fitted where its start already lowers it by {:.0} %)",
+             fitted by differences is fitted where its start already lowers it by {:.0} %, \
+             or at all where the model in hand is above the noise floor)",
             -100.0 * gain,
             100.0 * settings.min_improvement
         ));
@@ -707,16 +735,20 @@ mod tests {
         let s = DiagnoseSettings::default();
         let (traction, delay) = (Candidate::TRACTION_LIMIT, Candidate::INPUT_DELAY);
         // First of the round: only the differenced one's own gain counts.
-        assert!(not_fitted(traction, 96.0, 100.0, None, &s).is_some());
-        assert!(not_fitted(traction, 350.0, 100.0, None, &s).is_some());
-        assert!(not_fitted(traction, 94.0, 100.0, None, &s).is_none());
-        assert!(not_fitted(delay, 350.0, 100.0, None, &s).is_none());
+        assert!(not_fitted(traction, (96.0, 100.0), None, false, &s).is_some());
+        assert!(not_fitted(traction, (350.0, 100.0), None, false, &s).is_some());
+        assert!(not_fitted(traction, (94.0, 100.0), None, false, &s).is_none());
+        assert!(not_fitted(delay, (350.0, 100.0), None, false, &s).is_none());
         // Rivals of a candidate accepted from a start of 20.
-        assert!(not_fitted(delay, 59.0, 100.0, Some(20.0), &s).is_none());
-        let far = not_fitted(delay, 70.0, 100.0, Some(20.0), &s).expect("outside 3×");
+        assert!(not_fitted(delay, (59.0, 100.0), Some(20.0), false, &s).is_none());
+        let far = not_fitted(delay, (70.0, 100.0), Some(20.0), false, &s).expect("outside 3×");
         assert!(far.contains("3.5×"), "{far}");
-        assert!(not_fitted(traction, 21.0, 100.0, Some(20.0), &s).is_some());
+        assert!(not_fitted(traction, (21.0, 100.0), Some(20.0), false, &s).is_some());
         // A NaN start cost is no gain.
-        assert!(not_fitted(traction, f64::NAN, 100.0, None, &s).is_some());
+        assert!(not_fitted(traction, (f64::NAN, 100.0), None, false, &s).is_some());
+        // Where the model in hand is above the noise floor, any lower start is fitted.
+        assert!(not_fitted(traction, (99.0, 100.0), None, true, &s).is_none());
+        assert!(not_fitted(traction, (100.5, 100.0), None, true, &s).is_some());
+        assert!(not_fitted(traction, (f64::NAN, 100.0), None, true, &s).is_some());
     }
 }

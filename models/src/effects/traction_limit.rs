@@ -79,6 +79,35 @@ fn demands<'a>(
     })
 }
 
+/// Each sample's per-wheel acceleration demand [m/s²] as a model with effects asks it: the
+/// accelerations of its free-run outputs `sim` (central differences, one-sided at the ends),
+/// mixed as in [`demands`]. Where that model shapes the commands (a rate limit found before),
+/// the recorded command's steps are no demand: read through eq. 2.19 they put the level 4×
+/// above the floor's (tuning seed 1017, Khepera-like robot: 2.90 m/s² for μ g = 0.69; from
+/// the free run 0.56). Eq. 2.19 alone keeps [`demands`]: the free run's differences smooth a
+/// command step's demand over two samples, at 10 Hz far below the instantaneous one the
+/// probe's quantile was set on (a floor alone on the Pioneer-like robot was then refused).
+fn model_demands<'a>(
+    data: &'a ProbeData<'_>,
+    sim: &'a [[Vec<f64>; 2]],
+    half_mix: f64,
+) -> impl Iterator<Item = f64> + 'a {
+    let th = data.theta;
+    let k_w = half_mix * th[1] / th[0];
+    let dt = data.dt;
+    sim.iter().flat_map(move |[v, w]| {
+        let n = v.len().min(w.len());
+        let slope = move |y: &[f64], k: usize| {
+            let (a, b) = (k.saturating_sub(1), (k + 1).min(n - 1));
+            (y[b] - y[a]) / ((b - a).max(1) as f64 * dt)
+        };
+        (0..n).flat_map(move |k| {
+            let (a_v, a_w) = (slope(v, k), slope(w, k));
+            [(a_v + k_w * a_w).abs(), (a_v - k_w * a_w).abs()]
+        })
+    })
+}
+
 /// Fraction of the samples where either wheel's demand ([`demands`]) exceeds `level`.
 fn binding(recs: &[Recording], th: &[f64], half_mix: f64, level: f64) -> f64 {
     let d: Vec<f64> = demands(recs, th, half_mix).collect();
@@ -109,10 +138,15 @@ impl Effect for TractionLimit {
     fn differenced(&self) -> bool {
         true
     }
-    /// Level: the [`PROBE_QUANTILE`] quantile of the wheels' acceleration demand ([`demands`], μ = 1).
+    /// Level: the [`PROBE_QUANTILE`] quantile of the wheels' acceleration demand as the model
+    /// in hand asks it ([`demands`] for eq. 2.19 alone, [`model_demands`] for a model with
+    /// effects; μ = 1).
     fn probe(&self, data: &ProbeData<'_>) -> Option<Probe> {
         let half = 0.5 * data.track?;
-        let level = abs_quantile(demands(data.recordings, data.theta, half), PROBE_QUANTILE);
+        let level = match data.simulated {
+            Some(sim) => abs_quantile(model_demands(data, sim, half), PROBE_QUANTILE),
+            None => abs_quantile(demands(data.recordings, data.theta, half), PROBE_QUANTILE),
+        };
         (level > 0.0 && level.is_finite()).then(|| Probe::Levels {
             levels: vec![(0, level)],
             evidence: format!(
@@ -168,5 +202,54 @@ impl Effect for TractionLimit {
             });
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The probe's level, closed form: a free run that ramps v at 0.5 m/s² and ω at 2 rad/s²
+    /// asks each wheel 0.5 ± κ (θ2/θ1) 2 m/s² whatever the recorded command; eq. 2.19 alone
+    /// reads the demand off the command (a 1 m/s step: (1 − θ4 v)/θ1).
+    #[test]
+    fn the_demand_is_the_model_in_hands() {
+        let n = 101;
+        let dt = 0.02;
+        let t: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
+        let rec = Recording::new(
+            "ramp",
+            t.clone(),
+            vec![1.0; n],
+            vec![0.0; n],
+            vec![0.0; n],
+            vec![0.0; n],
+        )
+        .expect("valid");
+        let sim = [[
+            t.iter().map(|&s| 0.5 * s).collect::<Vec<_>>(),
+            t.iter().map(|&s| 2.0 * s).collect(),
+        ]];
+        let theta = [0.2, 0.1, 0.0, 1.0, 0.0, 1.0];
+        let track = 0.4;
+        let accel = [[vec![0.0; n], vec![0.0; n]]];
+        let recs = [rec];
+        let mut data = ProbeData {
+            recordings: &recs,
+            accel: &accel,
+            theta: &theta,
+            simulated: Some(&sim),
+            dt,
+            track: Some(track),
+        };
+        let level = |data: &ProbeData<'_>| match TractionLimit.probe(data) {
+            Some(Probe::Levels { levels, .. }) => levels[0].1,
+            _ => panic!("a level"),
+        };
+        // κ (θ2/θ1) ω̇ = 0.2 × 0.5 × 2 = 0.2: the wheels ask 0.7 and 0.3, the 80 % quantile 0.7.
+        assert!((level(&data) - 0.7).abs() < 1e-9, "{}", level(&data));
+        data.simulated = None;
+        // At rest under a 1 m/s command: 1/θ1 = 5 m/s² on both wheels.
+        assert!((level(&data) - 5.0).abs() < 1e-9, "{}", level(&data));
     }
 }
