@@ -31,8 +31,9 @@
 # accepts a subset of what 937ce0a accepts: a clean run that named nothing there names
 # nothing now); 1024 (single, clean; pairs window_end) once at d2fb45f; 1025 (single, clean;
 # pairs window_end) once at 9f514dd (d2fb45f's method), then looked at; 1026 (single, clean;
-# pairs window_end) and clean 2771-2870 once at d64710a (limits in the effect-size rule); the
-# next report takes 1027.. and 2871.. .
+# pairs window_end) and clean 2771-2870 once at d64710a (limits in the effect-size rule); 1027
+# (single, clean; pairs window_end) and clean 2871-2970 once at 5653a92 (the search goes on
+# while the report would say unexplained); the next report takes 1028.. and 2971.. .
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
