@@ -233,7 +233,7 @@ fn khepera_pair(effects: [&'static str; 2], seed: u64) -> Record {
 /// 7 % of the samples) beside a 49 ms latency. Once the latency is fitted the clamp's
 /// fingerprint is not significant over the family (p = 0.068) while ω's residual still follows
 /// the commands; the run ended with the latency alone and ω reported unexplained. Now what the
-/// report would call unexplained makes the three strongest fingerprints fitted, and the clamp
+/// report would call unexplained makes the strongest fingerprints fitted, and the clamp
 /// is kept at its level.
 #[test]
 fn a_weak_clamp_beside_a_latency_is_named() {

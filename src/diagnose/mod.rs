@@ -23,7 +23,7 @@
 //!    window (`locate`);
 //! 4. **name** — the candidates whose fingerprint survives the correction are nominated (when
 //!    none does but a residual is above the noise floor, or the model in hand leaves what
-//!    step 5 would report as unexplained: the three strongest, p < 0.5), the strongest first — every effect of `wheelid_models::effects::EFFECTS` (`input_delay`,
+//!    step 5 would report as unexplained: the four strongest, p < 0.5), the strongest first — every effect of `wheelid_models::effects::EFFECTS` (`input_delay`,
 //!    `acceleration_limit`, `velocity_saturation`, `coulomb_friction`, `wheel_asymmetry`,
 //!    `payload_change`, `gain_drift`, `slip`, `wheel_friction`, `effort_clamp`,
 //!    `amp_asymmetry`, `traction_limit`, `tyre_asymmetry`). A two-channel candidate acts on the channels whose own pattern is

@@ -140,14 +140,18 @@ fn structure_left(data: &Data, cur: &Current, here: &Location, alpha: f64) -> bo
     })
 }
 
-/// Fingerprints fitted when only the noise floor shows a mismatch, and most fingerprints in
-/// all once Holm has established one ([`test_round`]); counted as [`distinct`] patterns.
-const FLOOR_NOMINEES: usize = 3;
+/// Fingerprints fitted when only the noise floor (or structure the report would call
+/// unexplained) shows a mismatch, and most fingerprints in all once Holm has established one
+/// ([`test_round`]); counted as [`distinct`] patterns. Four, not three: on the Khepera-like
+/// robot a clamp beside a sagging battery ranks fourth (p = 0.07 behind the floor's 0.005,
+/// the drift's 0.036 and a payload's 0.052; tuning seed 1017). Tuning seeds' window-end pairs
+/// 362 → 367 of 450 (3 +1, 1017 +3, 1023 +1), none lost; singles and clean unchanged.
+const FLOOR_NOMINEES: usize = 4;
 
 /// Cosine between two one-column patterns (net of the fit's Jacobian) above which they are
 /// one explanation for [`FLOOR_NOMINEES`] (a larger tyre's pattern and a weak amplifier's:
 /// |cos| = 0.9997–0.99998 at the null on seeds 3 and 1017, where on a clamp + sagging battery
-/// of the Pioneer-like robot the pair took two of the three slots and the clamp's was lost;
+/// of the Pioneer-like robot the pair took two of the then three slots and the clamp's was lost;
 /// the other nominees' patterns there lie at |cos| ≤ 0.66).
 const DUPLICATE_COSINE: f64 = 0.99;
 
