@@ -11,14 +11,20 @@ mod harness;
 use harness::{Record, RunSpec, exactly_right, parse_seeds, run_all};
 use wheelid::core::Timing;
 
-/// One 120 s run of the Pioneer-like robot with one physics `effect`, its record printed.
-fn pioneer_run(timing: Timing, effect: &'static str, seed: u64) -> Record {
+/// One run of `profile` with the physics `effects` over `duration_s`, its record printed.
+fn run_one(
+    profile: &str,
+    timing: Timing,
+    effects: Vec<&'static str>,
+    seed: u64,
+    duration_s: f64,
+) -> Record {
     let spec = RunSpec {
-        profile: "pioneer3dx".into(),
+        profile: profile.into(),
         timing,
-        effects: vec![effect],
+        effects,
         seed,
-        duration_s: 120.0,
+        duration_s,
         jitter: 0.0,
         candidates: None,
         cache: None,
@@ -27,9 +33,12 @@ fn pioneer_run(timing: Timing, effect: &'static str, seed: u64) -> Record {
         .pop()
         .expect("one record");
     eprintln!(
-        "named {:?} {:?}, unexplained {:?}, fit v {:.1}→{:.1} ω {:.1}→{:.1}, truth {:?}",
+        "{}: named {:?} {:?}, rejected {:?}, unexplained {:?}, fit v {:.1}→{:.1} ω {:.1}→{:.1}, \
+         truth {:?}",
+        r.case,
         r.named,
         r.named_params,
+        r.rejected,
         r.unexplained,
         r.fit_nominal.v,
         r.fit_final.v,
@@ -38,6 +47,11 @@ fn pioneer_run(timing: Timing, effect: &'static str, seed: u64) -> Record {
         r.truth_params
     );
     r
+}
+
+/// One 120 s run of the Pioneer-like robot with one physics `effect`, its record printed.
+fn pioneer_run(timing: Timing, effect: &'static str, seed: u64) -> Record {
+    run_one("pioneer3dx", timing, vec![effect], seed, 120.0)
 }
 
 #[test]
@@ -206,25 +220,9 @@ fn a_floor_behind_a_rate_limit_acts() {
 }
 
 /// One 60 s window-end run of the Khepera-like robot with the physics `effects`, its record
-/// printed.
+/// printed; it must complete.
 fn khepera_pair(effects: [&'static str; 2], seed: u64) -> Record {
-    let spec = RunSpec {
-        profile: "khepera3".into(),
-        timing: Timing::WindowEnd,
-        effects: effects.to_vec(),
-        seed,
-        duration_s: 60.0,
-        jitter: 0.0,
-        candidates: None,
-        cache: None,
-    };
-    let r = run_all(std::slice::from_ref(&spec), 1, &|_, _| {})
-        .pop()
-        .expect("one record");
-    eprintln!(
-        "{}: named {:?} {:?}, rejected {:?}, unexplained {:?}, truth {:?}",
-        r.case, r.named, r.named_params, r.rejected, r.unexplained, r.truth_params
-    );
+    let r = run_one("khepera3", Timing::WindowEnd, effects.to_vec(), seed, 60.0);
     assert!(r.error.is_none(), "{:?}", r.error);
     r
 }
