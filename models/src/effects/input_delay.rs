@@ -18,7 +18,7 @@ static PARAMS: [ParamInfo; 1] = [ParamInfo {
 const MIN_PERIODS: f64 = 0.25;
 
 /// Dead time τ \[s\] of the commands (stage 1 of [`Terms`]); null 0, fitted within [0, 2] s,
-/// plausible from [`MIN_PERIODS`] sample periods up to 1.5 s.
+/// plausible from `MIN_PERIODS` sample periods up to 1.5 s.
 #[derive(Debug, Clone, Copy)]
 pub struct InputDelay;
 

@@ -138,8 +138,8 @@ impl Effect for TractionLimit {
     fn differenced(&self) -> bool {
         true
     }
-    /// Level: the [`PROBE_QUANTILE`] quantile of the wheels' acceleration demand as the model
-    /// in hand asks it ([`demands`] for eq. 2.19 alone, [`model_demands`] for a model with
+    /// Level: the `PROBE_QUANTILE` (0.8) quantile of the wheels' acceleration demand as the model
+    /// in hand asks it (`demands` for eq. 2.19 alone, `model_demands` for a model with
     /// effects; μ = 1).
     fn probe(&self, data: &ProbeData<'_>) -> Option<Probe> {
         let half = 0.5 * data.track?;
