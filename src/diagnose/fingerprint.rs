@@ -30,7 +30,6 @@ pub(super) fn patterns(c: Candidate, data: &Data, cur: &Current) -> Option<Vec<P
     let th6 = &cur.theta[..6];
     let (t_lo, t_hi) = data.span();
     let null = c.effect().null(th6, 0.5 * (t_lo + t_hi));
-    let effects = !cur.candidates.is_empty();
     let with = |vals: &[f64]| {
         let mut th = cur.theta.clone();
         th.extend_from_slice(vals);
@@ -52,10 +51,7 @@ pub(super) fn patterns(c: Candidate, data: &Data, cur: &Current) -> Option<Vec<P
             evidence,
             grid: 1,
         };
-    match c
-        .effect()
-        .probe(&data.probe_data(th6, effects.then_some(&cur.sim)))?
-    {
+    match c.effect().probe(&data.probe_data(cur))? {
         Probe::Gradient(steps) => {
             let cols = steps
                 .iter()

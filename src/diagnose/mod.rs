@@ -23,11 +23,13 @@
 //!    window (`locate`);
 //! 4. **name** — the candidates whose fingerprint survives the correction are nominated (when
 //!    none does but a residual is above the noise floor, or the model in hand leaves what
-//!    step 5 would report as unexplained: the four strongest, p < 0.5), the strongest first — every effect of `wheelid_models::effects::EFFECTS` (`input_delay`,
+//!    step 5 would report as unexplained: the four strongest, p < 0.5), the strongest first —
+//!    every effect of `wheelid_models::effects::EFFECTS` (`input_delay`,
 //!    `acceleration_limit`, `velocity_saturation`, `coulomb_friction`, `wheel_asymmetry`,
 //!    `payload_change`, `gain_drift`, `slip`, `wheel_friction`, `effort_clamp`,
-//!    `amp_asymmetry`, `traction_limit`, `tyre_asymmetry`). A two-channel candidate acts on the channels whose own pattern is
-//!    significant; the other channel's parameter is held at its null;
+//!    `amp_asymmetry`, `traction_limit`, `tyre_asymmetry`). A two-channel candidate acts on
+//!    the channels whose own pattern is significant; the other channel's parameter is held at
+//!    its null;
 //! 5. **model and accept** — the extended model is fitted by output error; the candidate is
 //!    kept only if the validation cost Σ_c Σ_k e²/σ_c² drops by at least
 //!    [`DiagnoseSettings::min_improvement`] with no channel's validation fit falling by more
@@ -71,6 +73,7 @@ mod screen;
 mod search;
 
 use accept::*;
+use assemble::structure_unexplained;
 pub use assemble::{LOW_FIT_PERCENT, NOISE_FLOOR_FACTOR, PRACTICAL_FIT_PERCENT};
 use fingerprint::*;
 use fit::*;

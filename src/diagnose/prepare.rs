@@ -223,18 +223,14 @@ pub(super) fn track_from_meta(rec: &Recording) -> Option<f64> {
 }
 
 impl Data {
-    /// What an effect's probe reads of the data ([`wheelid_core::effect::Effect::probe`]), at
-    /// the model in hand's θ1…θ6 `th6` and, where it has effects, its free-run outputs `sim`.
-    pub(super) fn probe_data<'a>(
-        &'a self,
-        th6: &'a [f64],
-        sim: Option<&'a Outputs>,
-    ) -> ProbeData<'a> {
+    /// What an effect's probe reads of the data ([`wheelid_core::effect::Effect::probe`]) at
+    /// the model in hand `cur`: its θ1…θ6 and, where it has effects, its free-run outputs.
+    pub(super) fn probe_data<'a>(&'a self, cur: &'a Current) -> ProbeData<'a> {
         ProbeData {
             recordings: &self.recs,
             accel: &self.accel,
-            theta: th6,
-            simulated: sim.map(|s| s.as_slice()),
+            theta: &cur.theta[..6],
+            simulated: (!cur.candidates.is_empty()).then_some(cur.sim.as_slice()),
             dt: self.dt,
             track: self.track,
         }

@@ -26,6 +26,8 @@ struct Round {
     decisions: Vec<bool>,
     jacobian: DMatrix<f64>,
     q: DMatrix<f64>,
+    /// The model in hand's validation fits, on the samples it is judged on.
+    fits: Channels,
 }
 
 /// The fit's own Jacobian at θ̂ where it gave one, else the sensitivities anew.
@@ -57,6 +59,7 @@ fn test_round(
     let jacobian = jacobian_of(data, cur)?;
     let q = score::basis(&jacobian);
     let e = data.frame().residuals(&cur.sim);
+    let (fits, _) = data.validate_on(&cur.sim, &data.judged(&[cur]));
     let nominees: Vec<Nominee> = std::thread::scope(|scope| {
         let handles: Vec<_> = pending
             .iter()
@@ -92,7 +95,7 @@ fn test_round(
                 count = distinct(&net, &nominated);
             }
         }
-    } else if above_floor(data, cur).iter().any(|&a| a) || structure_left(data, cur, here, alpha) {
+    } else if above_floor(&fits).iter().any(|&a| a) || structure_left(&fits, here, alpha) {
         // A residual well above the noise floor is a mismatch whatever the family says, and
         // so is one the report would call unexplained: then the FLOOR_NOMINEES distinct
         // fingerprints with the smallest p-values are fitted (validation evidence and the
@@ -112,32 +115,29 @@ fn test_round(
         decisions,
         jacobian,
         q,
+        fits,
     })
 }
 
-/// The channels whose validation residual is above the noise floor by more than
+/// The channels whose validation residual (`fits`) is above the noise floor by more than
 /// [`NOISE_FLOOR_FACTOR`] while their fit is below [`PRACTICAL_FIT_PERCENT`].
-pub(super) fn above_floor(data: &Data, cur: &Current) -> [bool; 2] {
-    let (fits, _) = data.validate_on(&cur.sim, &data.judged(&[cur]));
+fn above_floor(fits: &Channels) -> [bool; 2] {
     [fits.v, fits.w].map(|c| {
         (c.fit_percent.is_nan() || c.fit_percent < PRACTICAL_FIT_PERCENT)
             && c.noise_ratio > NOISE_FLOOR_FACTOR
     })
 }
 
-/// Whether the model in hand leaves what the report calls unexplained structure
-/// ([`super::assemble`]): a channel whose residual still depends on the commands (Holm over
-/// `here`'s independence tests at `alpha`) while its fit beyond the noise floor
-/// ([`ChannelFit::noise_corrected_fit_percent`]) is below
-/// [`PRACTICAL_FIT_PERCENT`]. A weak voltage clamp beside a stronger effect leaves this after
-/// the stronger one is fitted, with no fingerprint significant over the family.
-fn structure_left(data: &Data, cur: &Current, here: &Location, alpha: f64) -> bool {
+/// Whether the model in hand (validation fits `fits`) leaves what the report calls
+/// unexplained structure ([`structure_unexplained`], Holm over `here`'s independence tests at
+/// `alpha`). A weak voltage clamp beside a stronger effect leaves this after the stronger one
+/// is fitted, with no fingerprint significant over the family.
+fn structure_left(fits: &Channels, here: &Location, alpha: f64) -> bool {
     let left = holm(&here.p_values(), alpha);
-    let (fits, _) = data.validate_on(&cur.sim, &data.judged(&[cur]));
-    [fits.v, fits.w].iter().enumerate().any(|(c, f)| {
-        let beyond = f.noise_corrected_fit_percent;
-        (left[2 * c] || left[2 * c + 1]) && (beyond.is_nan() || beyond < PRACTICAL_FIT_PERCENT)
-    })
+    [fits.v, fits.w]
+        .iter()
+        .enumerate()
+        .any(|(c, f)| structure_unexplained(&left, c, f))
 }
 
 /// Fingerprints fitted when only the noise floor (or structure the report would call
@@ -305,7 +305,7 @@ fn first_accepted(
     let mut more = 0;
     let mut first_start = f64::INFINITY;
     let now = data.frame().residuals(&cur.sim).norm_squared();
-    let misfit = above_floor(data, cur).iter().any(|&a| a);
+    let misfit = above_floor(&round.fits).iter().any(|&a| a);
     for (i, st) in ready {
         let c = round.nominees[i].pattern.candidate;
         if best.is_some() && more == MORE_FITS {
@@ -610,13 +610,13 @@ pub(super) fn run(
         };
         // Evidence counts only where the model misses a practically relevant share of a
         // channel (a 99.9 % fit with structure at the 0.1 % level is kept), in every round.
-        let (fits, _) = data.validate_on(&cur.sim, &data.judged(&[&cur]));
+        let fits = &round.fits;
         let relevant = [fits.v.fit_percent, fits.w.fit_percent]
             .iter()
             .any(|f| f.is_nan() || *f < PRACTICAL_FIT_PERCENT);
         if round_no == 0 {
             out.tests = family(&round);
-            let floor = above_floor(data, &cur).iter().any(|&a| a);
+            let floor = above_floor(fits).iter().any(|&a| a);
             out.mismatch = (round.decisions.iter().any(|&d| d) || floor) && relevant;
         }
         out.rounds.push(fingerprints(&round));

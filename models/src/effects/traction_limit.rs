@@ -73,15 +73,20 @@ fn demands<'a>(
             let (v, w) = (r.v[k], r.w[k]);
             let a_v = (r.v_ref[k] - th[3] * v + th[2] * w * w) / th[0];
             let a_w = (r.w_ref[k] - th[5] * w - th[4] * v * w) / th[1];
-            let k_w = half_mix * th[1] / th[0];
-            [(a_v + k_w * a_w).abs(), (a_v - k_w * a_w).abs()]
+            per_wheel(a_v, a_w, half_mix * th[1] / th[0])
         })
     })
 }
 
+/// The right and left wheels' |acceleration| [m/s²] for the body's (v̇, ω̇), ω̇ entering each
+/// wheel with the weight `k_w` = κ θ2/θ1 (κ = μ d/2).
+fn per_wheel(a_v: f64, a_w: f64, k_w: f64) -> [f64; 2] {
+    [(a_v + k_w * a_w).abs(), (a_v - k_w * a_w).abs()]
+}
+
 /// Each sample's per-wheel acceleration demand [m/s²] as a model with effects asks it: the
 /// accelerations of its free-run outputs `sim` (central differences, one-sided at the ends),
-/// mixed as in [`demands`]. Where that model shapes the commands (a rate limit found before),
+/// mixed by [`per_wheel`] as in [`demands`]. Where that model shapes the commands (a rate limit found before),
 /// the recorded command's steps are no demand: read through eq. 2.19 they put the level 4×
 /// above the floor's (tuning seed 1017, Khepera-like robot: 2.90 m/s² for μ g = 0.69; from
 /// the free run 0.56). Eq. 2.19 alone keeps [`demands`]: the free run's differences smooth a
@@ -101,10 +106,7 @@ fn model_demands<'a>(
             let (a, b) = (k.saturating_sub(1), (k + 1).min(n - 1));
             (y[b] - y[a]) / ((b - a).max(1) as f64 * dt)
         };
-        (0..n).flat_map(move |k| {
-            let (a_v, a_w) = (slope(v, k), slope(w, k));
-            [(a_v + k_w * a_w).abs(), (a_v - k_w * a_w).abs()]
-        })
+        (0..n).flat_map(move |k| per_wheel(slope(v, k), slope(w, k), k_w))
     })
 }
 
@@ -138,7 +140,7 @@ impl Effect for TractionLimit {
     fn differenced(&self) -> bool {
         true
     }
-    /// Level: the `PROBE_QUANTILE` (0.8) quantile of the wheels' acceleration demand as the model
+    /// Level: the `PROBE_QUANTILE` quantile of the wheels' acceleration demand as the model
     /// in hand asks it (`demands` for eq. 2.19 alone, `model_demands` for a model with
     /// effects; μ = 1).
     fn probe(&self, data: &ProbeData<'_>) -> Option<Probe> {
