@@ -308,8 +308,10 @@ fn first_accepted(
     let misfit = above_floor(&round.fits).iter().any(|&a| a);
     for (i, st) in ready {
         let c = round.nominees[i].pattern.candidate;
-        if best.is_some() && more == MORE_FITS {
-            break;
+        // The strongest fingerprint is fitted even past MORE_FITS: its screened start (θ held
+        // at the nominal fit, which has absorbed part of the effect) may rank it late.
+        if best.is_some() && more >= MORE_FITS && i != order[0] {
+            continue;
         }
         let accepted = best.is_some().then_some(first_start);
         if let Some(reason) = not_fitted(c, (st.cost, now), accepted, misfit, settings) {
