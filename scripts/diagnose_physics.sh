@@ -34,7 +34,9 @@
 # pairs window_end) and clean 2771-2870 once at d64710a (limits in the effect-size rule); 1027
 # (single, clean; pairs window_end) and clean 2871-2970 once at 5653a92 (the search goes on
 # while the report would say unexplained); 1028 (single, clean; pairs window_end) and clean
-# 2971-3070 once at 7f8be6a (four nominees); the next report takes 1029.. and 3071.. .
+# 2971-3070 once at 7f8be6a (four nominees); 1029 (single, clean; pairs window_end) and clean
+# 3071-3170 once at 998fcf9 (fingerprints' variance from the Gauss-Newton step's residual);
+# the next report takes 1030.. and 3171.. .
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
