@@ -221,6 +221,13 @@ fn a_floor_behind_a_rate_limit_acts() {
 
 /// One 60 s window-end run of the Khepera-like robot with the physics `effects`, its record
 /// printed; it must complete.
+/// The named clamp's level is within 20 % of the physics' (V r/k_P).
+fn assert_clamp_level(r: &Record) {
+    let level = r.named_params["effort_clamp"]["effort_max"];
+    let truth = r.truth_params["voltage_clamp"]["effort_max"];
+    assert!((level - truth).abs() <= 0.2 * truth, "{level} vs {truth}");
+}
+
 fn khepera_pair(effects: [&'static str; 2], seed: u64) -> Record {
     let r = run_one("khepera3", Timing::WindowEnd, effects.to_vec(), seed, 60.0);
     assert!(r.error.is_none(), "{:?}", r.error);
@@ -237,9 +244,7 @@ fn khepera_pair(effects: [&'static str; 2], seed: u64) -> Record {
 fn a_weak_clamp_beside_a_latency_is_named() {
     let r = khepera_pair(["latency", "voltage_clamp"], 1026);
     assert!(r.exactly_right, "{:?}", r.named);
-    let level = r.named_params["effort_clamp"]["effort_max"];
-    let truth = r.truth_params["voltage_clamp"]["effort_max"];
-    assert!((level - truth).abs() <= 0.2 * truth, "{level} vs {truth}");
+    assert_clamp_level(&r);
 }
 
 /// Tuning seed 1017: a slippery floor behind a rate limit. Once the rate limit is fitted, the
@@ -270,9 +275,7 @@ fn a_clamp_under_window_stamps_is_named() {
         60.0,
     );
     assert!(r.exactly_right, "{:?}", r.named);
-    let level = r.named_params["effort_clamp"]["effort_max"];
-    let truth = r.truth_params["voltage_clamp"]["effort_max"];
-    assert!((level - truth).abs() <= 0.2 * truth, "{level} vs {truth}");
+    assert_clamp_level(&r);
 }
 
 /// Tuning seed 1023: a 58 ms latency on the Pioneer-like robot. Its screened start (θ held at
