@@ -13,7 +13,8 @@
 //!    Newey–West long-run variance, which keeps its level when the residual's size follows
 //!    the commands; `wheelid_core::residual`), free-run fit % and the residual over the
 //!    measured series' noise floor; on the training blocks: each candidate's
-//!    fingerprint, a score test of its pattern (`score`; a limit probed at three fractions of
+//!    fingerprint, a test of its pattern's Gauss–Newton step with a HAC variance from that
+//!    step's residual (`score`; a limit probed at three fractions of
 //!    the level read off the data, a payload change at five times, Bonferroni for each grid).
 //!    A mismatch is declared on tests that survive Holm's correction over the whole family
 //!    (independence and fingerprints), or where a channel's validation residual is more than
@@ -221,7 +222,8 @@ pub struct Fingerprint {
     pub effect: String,
     /// Channels whose own pattern is significant (|z| ≥ 2.5).
     pub channels: Vec<String>,
-    /// Score statistic (χ² with `dof` degrees of freedom).
+    /// Wald statistic of the pattern's Gauss–Newton step (≈ χ² with `dof` degrees of freedom;
+    /// its p-value from F with the HAC estimate's equivalent degrees of freedom).
     pub stat: f64,
     /// Degrees of freedom.
     pub dof: usize,
