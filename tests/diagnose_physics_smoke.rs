@@ -220,8 +220,6 @@ fn a_floor_behind_a_rate_limit_acts() {
     assert!(beside.marginal_visibility["floor_mu"].w > harness::MASKED_PERCENT);
 }
 
-/// One 60 s window-end run of the Khepera-like robot with the physics `effects`, its record
-/// printed; it must complete.
 /// The named clamp's level is within 20 % of the physics' (V r/k_P).
 fn assert_clamp_level(r: &Record) {
     let level = r.named_params["effort_clamp"]["effort_max"];
@@ -229,6 +227,8 @@ fn assert_clamp_level(r: &Record) {
     assert!((level - truth).abs() <= 0.2 * truth, "{level} vs {truth}");
 }
 
+/// One 60 s window-end run of the Khepera-like robot with the physics `effects`, its record
+/// printed; it must complete.
 fn khepera_pair(effects: [&'static str; 2], seed: u64) -> Record {
     let r = run_one("khepera3", Timing::WindowEnd, effects.to_vec(), seed, 60.0);
     assert!(r.error.is_none(), "{:?}", r.error);

@@ -368,7 +368,7 @@ mod tests {
     /// A strong effect in the residual is found with the strength it has: e = 3 s + white
     /// noise (σ = 1) over 1,000 instants, s in bursts, 50 lags. The Gauss–Newton regression's
     /// statistic is then ≈ (3 ‖s‖)² (‖s‖² ≈ 240): above 1,000 here, where a long-run variance
-    /// from the null's residual (e itself) caps it near instants/lags (measured: 20).
+    /// from the null's residual (e itself) caps it near instants/lags (measured: 10.8).
     #[test]
     fn a_strong_pattern_scores_as_strong() {
         let rows = 2000;
