@@ -392,6 +392,14 @@ pub trait Effect: Send + Sync + std::fmt::Debug {
     fn differenced(&self) -> bool {
         false
     }
+    /// The quantity the encoders see it move, where other effects move the same one (`None`:
+    /// its own). Effects of one quantity are alternatives the encoders cannot tell apart (a
+    /// weak amplifier, a larger tyre and a setpoint ratio all make one wheel act weaker): the
+    /// diagnosis names at most one of them, and does not search the others once one is in the
+    /// model.
+    fn quantity(&self) -> Option<&'static str> {
+        None
+    }
     /// The force it adds at state (v [m/s], ω [rad/s]) with parameters `p` on a robot of wheel
     /// track `track` \[m\] (independent of θ); the default adds none.
     fn force(&self, _p: &[f64], _v: f64, _w: f64, _track: f64) -> Force {

@@ -13,6 +13,14 @@ pub const LOW_FIT_PERCENT: f64 = 70.0;
 /// and the tests still find structure at that level).
 pub const PRACTICAL_FIT_PERCENT: f64 = 99.0;
 
+/// Once an effect is in the model, the search goes on while a channel's validation fit is
+/// below this [%], where the nominal model's mismatch needs a fit below
+/// [`PRACTICAL_FIT_PERCENT`]: a second effect beside the first is often a few tenths of a
+/// percent of the channel (tuning seeds on the physics backend, Pioneer-like robot: a
+/// voltage clamp beside a battery's gain drift left v 99.8 %, ω 99.3 % with the clamp's
+/// fingerprint at χ²(1) = 54.5; clean runs of that robot fit 99.85–99.9 %).
+pub const SEARCH_FIT_PERCENT: f64 = 99.5;
+
 /// A channel whose validation residual RMS exceeds this multiple of its measurement noise
 /// floor ([`ChannelFit::noise_ratio`]) while its fit is below [`PRACTICAL_FIT_PERCENT`] holds
 /// structure the model misses, whatever the tests say (tuning seeds 1–4 on the physics

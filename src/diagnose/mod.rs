@@ -54,7 +54,9 @@
 //!    change inside it: every model compared with one that leaves such an interval open is
 //!    judged, as that one is, on the validation samples outside it. Then the search starts again from the extended
 //!    model (forward selection, at most [`DiagnoseSettings::max_effects`], until every channel
-//!    is practically fitted). What stays significant or above the noise floor in a channel
+//!    is fitted to [`SEARCH_FIT_PERCENT`]; effects that move one quantity the encoders see,
+//!    [`wheelid_core::Effect::quantity`], are alternatives: once one is in, the others are
+//!    not searched). What stays significant or above the noise floor in a channel
 //!    fitted below [`PRACTICAL_FIT_PERCENT`] once the noise floor is taken out of its residual
 //!    ([`ChannelFit::noise_corrected_fit_percent`]: the sensor's own noise is no unexplained
 //!    physics), and any channel below [`LOW_FIT_PERCENT`], is reported as [`Unexplained`],
@@ -75,7 +77,9 @@ mod search;
 
 use accept::*;
 use assemble::structure_unexplained;
-pub use assemble::{LOW_FIT_PERCENT, NOISE_FLOOR_FACTOR, PRACTICAL_FIT_PERCENT};
+pub use assemble::{
+    LOW_FIT_PERCENT, NOISE_FLOOR_FACTOR, PRACTICAL_FIT_PERCENT, SEARCH_FIT_PERCENT,
+};
 use fingerprint::*;
 use fit::*;
 use prepare::*;

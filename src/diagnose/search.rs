@@ -571,6 +571,12 @@ fn backward_step(
     cur
 }
 
+/// Whether `a` and `b` move one quantity ([`wheelid_core::Effect::quantity`]): alternatives,
+/// of which a model holds at most one.
+fn same_quantity(a: Candidate, b: Candidate) -> bool {
+    a.effect().quantity().is_some() && a.effect().quantity() == b.effect().quantity()
+}
+
 /// Runs the search from the nominal model `cur` (module docs, steps 2–7).
 pub(super) fn run(
     data: &Data,
@@ -595,6 +601,7 @@ pub(super) fn run(
             .iter()
             .copied()
             .filter(|c| !cur.candidates.contains(c) && !tried.contains(c))
+            .filter(|c| !cur.candidates.iter().any(|k| same_quantity(*k, *c)))
             .collect();
         let here = if round_no == 0 {
             location.clone()
@@ -611,11 +618,18 @@ pub(super) fn run(
             break;
         };
         // Evidence counts only where the model misses a practically relevant share of a
-        // channel (a 99.9 % fit with structure at the 0.1 % level is kept), in every round.
+        // channel (a 99.9 % fit with structure at the 0.1 % level is kept), in every round:
+        // the nominal model below PRACTICAL_FIT_PERCENT, an extended one below
+        // SEARCH_FIT_PERCENT.
         let fits = &round.fits;
+        let enough = if round_no == 0 {
+            PRACTICAL_FIT_PERCENT
+        } else {
+            SEARCH_FIT_PERCENT
+        };
         let relevant = [fits.v.fit_percent, fits.w.fit_percent]
             .iter()
-            .any(|f| f.is_nan() || *f < PRACTICAL_FIT_PERCENT);
+            .any(|f| f.is_nan() || *f < enough);
         if round_no == 0 {
             out.tests = family(&round);
             let floor = above_floor(fits).iter().any(|&a| a);
@@ -670,6 +684,42 @@ mod tests {
             },
             p_value: 0.01,
         }
+    }
+
+    /// Alternatives: the three wheel imbalances, the two dry frictions and the two floor slips
+    /// are one quantity each; different physics, and effects of their own quantity (None), are
+    /// not, not even with themselves.
+    #[test]
+    fn effects_of_one_quantity_are_alternatives() {
+        use Candidate as C;
+        let groups = [
+            &[C::WHEEL_ASYMMETRY, C::AMP_ASYMMETRY, C::TYRE_ASYMMETRY][..],
+            &[C::COULOMB_FRICTION, C::WHEEL_FRICTION],
+            &[C::SLIP, C::TRACTION_LIMIT],
+        ];
+        for (g, group) in groups.iter().enumerate() {
+            for &a in *group {
+                for &b in *group {
+                    assert!(same_quantity(a, b), "{} {}", a.name(), b.name());
+                }
+                for other in groups.iter().skip(g + 1).flat_map(|o| o.iter()) {
+                    assert!(!same_quantity(a, *other), "{} {}", a.name(), other.name());
+                }
+                assert!(!same_quantity(a, C::GAIN_DRIFT));
+            }
+        }
+        for own in [
+            C::INPUT_DELAY,
+            C::EFFORT_CLAMP,
+            C::GAIN_DRIFT,
+            C::PAYLOAD_CHANGE,
+        ] {
+            assert!(!same_quantity(own, own), "{}", own.name());
+        }
+        assert!(!same_quantity(
+            C::ACCELERATION_LIMIT,
+            C::VELOCITY_SATURATION
+        ));
     }
 
     /// Distinct nominees: one-column patterns within cosine 0.99 of an earlier nominated one's,

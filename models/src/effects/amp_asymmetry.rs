@@ -34,6 +34,9 @@ impl Effect for AmpAsymmetry {
     fn name(&self) -> &'static str {
         "amp_asymmetry"
     }
+    fn quantity(&self) -> Option<&'static str> {
+        Some(super::WHEEL_IMBALANCE)
+    }
     fn params(&self) -> &'static [ParamInfo] {
         &PARAMS
     }

@@ -26,6 +26,9 @@ impl Effect for CoulombFriction {
     fn name(&self) -> &'static str {
         "coulomb_friction"
     }
+    fn quantity(&self) -> Option<&'static str> {
+        Some(super::DRY_FRICTION)
+    }
     fn params(&self) -> &'static [ParamInfo] {
         &PARAMS
     }

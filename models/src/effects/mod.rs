@@ -51,6 +51,18 @@ pub static EFFECTS: [&dyn Effect; 13] = [
     &TyreAsymmetry,
 ];
 
+/// [`Effect::quantity`] of the effects that make one wheel act weaker than the other
+/// (`wheel_asymmetry`, `amp_asymmetry`, `tyre_asymmetry`): the loop holds each wheel's encoder
+/// rate, so a weak amplifier, a larger tyre and a setpoint ratio differ only in how that wheel
+/// answers in transients, which encoder data do not tell apart.
+pub const WHEEL_IMBALANCE: &str = "wheel imbalance";
+/// [`Effect::quantity`] of dry friction, as one term on (v, ω) (`coulomb_friction`) or per
+/// wheel (`wheel_friction`).
+pub const DRY_FRICTION: &str = "dry friction";
+/// [`Effect::quantity`] of the wheels slipping on the floor, as losses (`slip`) or as a
+/// traction limit (`traction_limit`).
+pub const FLOOR_SLIP: &str = "floor slip";
+
 /// A value far beyond any command: a limit at this level never binds (a limit's null).
 pub const NEVER: f64 = 1e6;
 

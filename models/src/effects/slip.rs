@@ -25,6 +25,9 @@ impl Effect for Slip {
     fn name(&self) -> &'static str {
         "slip"
     }
+    fn quantity(&self) -> Option<&'static str> {
+        Some(super::FLOOR_SLIP)
+    }
     fn params(&self) -> &'static [ParamInfo] {
         &PARAMS
     }

@@ -121,6 +121,9 @@ impl Effect for TractionLimit {
     fn name(&self) -> &'static str {
         "traction_limit"
     }
+    fn quantity(&self) -> Option<&'static str> {
+        Some(super::FLOOR_SLIP)
+    }
     fn params(&self) -> &'static [ParamInfo] {
         &PARAMS
     }

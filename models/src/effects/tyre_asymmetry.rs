@@ -42,6 +42,9 @@ impl Effect for TyreAsymmetry {
     fn name(&self) -> &'static str {
         "tyre_asymmetry"
     }
+    fn quantity(&self) -> Option<&'static str> {
+        Some(super::WHEEL_IMBALANCE)
+    }
     fn params(&self) -> &'static [ParamInfo] {
         &PARAMS
     }

@@ -22,6 +22,9 @@ impl Effect for WheelAsymmetry {
     fn name(&self) -> &'static str {
         "wheel_asymmetry"
     }
+    fn quantity(&self) -> Option<&'static str> {
+        Some(super::WHEEL_IMBALANCE)
+    }
     fn params(&self) -> &'static [ParamInfo] {
         &PARAMS
     }

@@ -34,6 +34,9 @@ impl Effect for WheelFriction {
     fn name(&self) -> &'static str {
         "wheel_friction"
     }
+    fn quantity(&self) -> Option<&'static str> {
+        Some(super::DRY_FRICTION)
+    }
     fn params(&self) -> &'static [ParamInfo] {
         &PARAMS
     }
