@@ -36,7 +36,9 @@
 # while the report would say unexplained); 1028 (single, clean; pairs window_end) and clean
 # 2971-3070 once at 7f8be6a (four nominees); 1029 (single, clean; pairs window_end) and clean
 # 3071-3170 once at 998fcf9 (fingerprints' variance from the Gauss-Newton step's residual);
-# the next report takes 1030.. and 3171.. .
+# 1030 (single, clean; pairs window_end) and clean 3171-3270 once at 31ac733 (the search
+# goes on below 99.5 %, effects of one quantity are alternatives); the next report takes
+# 1031.. and 3271.. .
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions

@@ -227,10 +227,18 @@ fn assert_clamp_level(r: &Record) {
     assert!((level - truth).abs() <= 0.2 * truth, "{level} vs {truth}");
 }
 
-/// One 60 s window-end run of the Khepera-like robot with the physics `effects`, its record
+/// One window-end run of `profile` with the physics `effects` over the harness's default
+/// duration (60 s for the Khepera-like robot, 120 s for the Pioneer-like one), its record
 /// printed; it must complete.
-fn khepera_pair(effects: [&'static str; 2], seed: u64) -> Record {
-    let r = run_one("khepera3", Timing::WindowEnd, effects.to_vec(), seed, 60.0);
+fn pair(profile: &str, effects: [&'static str; 2], seed: u64) -> Record {
+    let duration_s = if profile == "khepera3" { 60.0 } else { 120.0 };
+    let r = run_one(
+        profile,
+        Timing::WindowEnd,
+        effects.to_vec(),
+        seed,
+        duration_s,
+    );
     assert!(r.error.is_none(), "{:?}", r.error);
     r
 }
@@ -243,7 +251,7 @@ fn khepera_pair(effects: [&'static str; 2], seed: u64) -> Record {
 /// is kept at its level.
 #[test]
 fn a_weak_clamp_beside_a_latency_is_named() {
-    let r = khepera_pair(["latency", "voltage_clamp"], 1026);
+    let r = pair("khepera3", ["latency", "voltage_clamp"], 1026);
     assert!(r.exactly_right, "{:?}", r.named);
     assert_clamp_level(&r);
 }
@@ -256,7 +264,7 @@ fn a_weak_clamp_beside_a_latency_is_named() {
 /// model in hand above the noise floor lets any lowering start be fitted.
 #[test]
 fn a_floor_behind_a_rate_limit_is_named() {
-    let r = khepera_pair(["rate_limit", "floor_mu"], 1017);
+    let r = pair("khepera3", ["rate_limit", "floor_mu"], 1017);
     assert!(r.exactly_right, "{:?}", r.named);
 }
 
@@ -291,20 +299,6 @@ fn the_strongest_fingerprint_is_fitted() {
     assert!(r.exactly_right, "{:?}", r.named);
 }
 
-/// One 120 s window-end run of the Pioneer-like robot with the physics `effects`, its record
-/// printed; it must complete.
-fn pioneer_pair(effects: [&'static str; 2], seed: u64) -> Record {
-    let r = run_one(
-        "pioneer3dx",
-        Timing::WindowEnd,
-        effects.to_vec(),
-        seed,
-        120.0,
-    );
-    assert!(r.error.is_none(), "{:?}", r.error);
-    r
-}
-
 /// Tuning seed 1029 (hold-out at 998fcf9, then looked at): the Pioneer-like robot's clamped
 /// amplifiers beside a sagging battery. Once the battery's gain drift is fitted, v and ω fit
 /// 99.8 % and 99.3 %, and the search stopped at 99 % with the clamp's fingerprint at χ²(1) =
@@ -312,7 +306,7 @@ fn pioneer_pair(effects: [&'static str; 2], seed: u64) -> Record {
 /// level.
 #[test]
 fn a_clamp_beside_a_battery_is_searched_for_past_99_percent() {
-    let r = pioneer_pair(["voltage_clamp", "gain_sag"], 1029);
+    let r = pair("pioneer3dx", ["voltage_clamp", "gain_sag"], 1029);
     assert!(r.exactly_right, "{:?}", r.named);
     assert_clamp_level(&r);
 }
@@ -323,6 +317,6 @@ fn a_clamp_beside_a_battery_is_searched_for_past_99_percent() {
 /// apart). Effects of one quantity are now alternatives: the imbalance is named once.
 #[test]
 fn a_wheel_imbalance_is_named_once() {
-    let r = pioneer_pair(["latency", "tyre_radius_right"], 1019);
+    let r = pair("pioneer3dx", ["latency", "tyre_radius_right"], 1019);
     assert!(r.exactly_right, "{:?}", r.named);
 }
