@@ -228,10 +228,9 @@ fn assert_clamp_level(r: &Record) {
 }
 
 /// One window-end run of `profile` with the physics `effects` over the harness's default
-/// duration (60 s for the Khepera-like robot, 120 s for the Pioneer-like one), its record
-/// printed; it must complete.
+/// duration ([`harness::default_duration`]), its record printed; it must complete.
 fn pair(profile: &str, effects: [&'static str; 2], seed: u64) -> Record {
-    let duration_s = if profile == "khepera3" { 60.0 } else { 120.0 };
+    let duration_s = harness::default_duration(profile);
     let r = run_one(
         profile,
         Timing::WindowEnd,
