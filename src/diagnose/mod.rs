@@ -19,7 +19,8 @@
 //!    A mismatch is declared on tests that survive Holm's correction over the whole family
 //!    (independence and fingerprints), or where a channel's validation residual is more than
 //!    [`NOISE_FLOOR_FACTOR`] times its measurement noise floor, and only where some channel's
-//!    validation fit is below [`PRACTICAL_FIT_PERCENT`]; never on whiteness alone;
+//!    validation fit is below [`PRACTICAL_FIT_PERCENT`] (or below [`SEARCH_FIT_PERCENT`] with
+//!    its residual above that multiple of the floor); never on whiteness alone;
 //! 3. **locate** — per channel, the residual by lag, frequency band, operating region and time
 //!    window (`locate`);
 //! 4. **name** — the candidates whose fingerprint survives the correction are nominated (when

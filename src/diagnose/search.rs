@@ -119,6 +119,25 @@ fn test_round(
     })
 }
 
+/// Whether the model in hand (validation fits `fits`) misses a practically relevant share of
+/// a channel, so that its evidence counts (a 99.9 % fit with structure at the 0.1 % level is
+/// kept): the nominal model (`nominal`) below [`PRACTICAL_FIT_PERCENT`], an extended one below
+/// [`SEARCH_FIT_PERCENT`]; and either below [`SEARCH_FIT_PERCENT`] where the residual stays
+/// above [`NOISE_FLOOR_FACTOR`] times the channel's noise floor (a weak amplifier asymmetry
+/// on the quiet Khepera-like robot, instant stamps, left the nominal fit at 99.0–99.1 % with
+/// 2× the floor in the residual: tuning seed 1025 and hold-out seed 1030). A NaN fit counts.
+fn misses_relevant_share(fits: &Channels, nominal: bool) -> bool {
+    let enough = if nominal {
+        PRACTICAL_FIT_PERCENT
+    } else {
+        SEARCH_FIT_PERCENT
+    };
+    [fits.v, fits.w].iter().any(|c| {
+        let f = c.fit_percent;
+        f.is_nan() || f < enough || (f < SEARCH_FIT_PERCENT && c.noise_ratio > NOISE_FLOOR_FACTOR)
+    })
+}
+
 /// The channels whose validation residual (`fits`) is above the noise floor by more than
 /// [`NOISE_FLOOR_FACTOR`] while their fit is below [`PRACTICAL_FIT_PERCENT`].
 fn above_floor(fits: &Channels) -> [bool; 2] {
@@ -617,19 +636,8 @@ pub(super) fn run(
         let Some(round) = test_round(data, &cur, &pending, &here, settings.alpha) else {
             break;
         };
-        // Evidence counts only where the model misses a practically relevant share of a
-        // channel (a 99.9 % fit with structure at the 0.1 % level is kept), in every round:
-        // the nominal model below PRACTICAL_FIT_PERCENT, an extended one below
-        // SEARCH_FIT_PERCENT.
         let fits = &round.fits;
-        let enough = if round_no == 0 {
-            PRACTICAL_FIT_PERCENT
-        } else {
-            SEARCH_FIT_PERCENT
-        };
-        let relevant = [fits.v.fit_percent, fits.w.fit_percent]
-            .iter()
-            .any(|f| f.is_nan() || *f < enough);
+        let relevant = misses_relevant_share(fits, round_no == 0);
         if round_no == 0 {
             out.tests = family(&round);
             let floor = above_floor(fits).iter().any(|&a| a);
@@ -683,6 +691,43 @@ mod tests {
                 explained: 0.0,
             },
             p_value: 0.01,
+        }
+    }
+
+    fn channels(fit: [f64; 2], ratio: [f64; 2]) -> Channels {
+        let ch = |c: usize| ChannelFit {
+            fit_percent: fit[c],
+            rms: 0.01,
+            noise_ratio: ratio[c],
+            noise_corrected_fit_percent: fit[c],
+        };
+        Channels { v: ch(0), w: ch(1) }
+    }
+
+    /// The nominal model's evidence counts below 99 %, or below 99.5 % with the residual above
+    /// twice the floor; an extended model's below 99.5 %; a quiet 99.2 % and anything at or
+    /// above 99.5 % is kept.
+    #[test]
+    fn a_relevant_share_is_below_99_or_above_the_floor_below_99_5() {
+        let cases = [
+            ([98.9, 99.9], [1.0, 1.0], true, true),
+            ([99.2, 99.9], [1.5, 1.0], false, true),
+            ([99.2, 99.9], [2.5, 1.0], true, true),
+            ([99.9, 99.6], [1.0, 3.0], false, false),
+            ([99.9, f64::NAN], [1.0, 1.0], true, true),
+        ];
+        for (fit, ratio, nominal, extended) in cases {
+            let ch = channels(fit, ratio);
+            assert_eq!(
+                misses_relevant_share(&ch, true),
+                nominal,
+                "{fit:?} {ratio:?}"
+            );
+            assert_eq!(
+                misses_relevant_share(&ch, false),
+                extended,
+                "{fit:?} {ratio:?}"
+            );
         }
     }
 
