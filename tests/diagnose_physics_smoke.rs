@@ -128,8 +128,9 @@ fn a_pioneer_voltage_clamp_fitted_to_99_percent_is_kept() {
 /// six-θ model cannot follow (validation fit ~80 % in v). Until the `traction_limit`
 /// candidate (2026-11-25) no candidate modelled it and every floor run ended `unexplained`;
 /// now it is named, with the top acceleration within 20 % of μ g (1 − b/x_c) (what the floor can
-/// pass to the driven wheels: the caster at x_c carries the share b/x_c of the weight), and
-/// both channels explained to ≥ 95 %.
+/// pass to the driven wheels: the caster at x_c carries the share b/x_c of the weight), the
+/// load transfer within 20 % of μ r/x_c (the centre of mass at the axle's height r), and both
+/// channels explained to ≥ 95 %.
 #[test]
 fn a_pioneer_on_a_slippery_floor_is_named_traction_limit() {
     let r = &pioneer_run(Timing::Instant, "floor_mu", 2);
@@ -149,6 +150,14 @@ fn a_pioneer_on_a_slippery_floor_is_named_traction_limit() {
     assert!(
         (a - limit).abs() <= 0.2 * limit,
         "a_max {a} vs μ g (1 − b/x_c) {limit}"
+    );
+    // Accelerating pitches the body onto its wheels: the centre of mass at the axle's height r
+    // moves m a r/x_c of load, a load transfer of μ r/x_c.
+    let lt = r.named_params["traction_limit"]["load_transfer"];
+    let pitch = mu * p.r / p.caster_x;
+    assert!(
+        (lt - pitch).abs() <= 0.2 * pitch,
+        "load_transfer {lt} vs μ r/x_c {pitch}"
     );
 }
 

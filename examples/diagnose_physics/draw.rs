@@ -338,7 +338,8 @@ fn draw_plain(
 /// closed-form steady loss, [`friction_loss_per_nm`]; `coulomb_friction` acts on v and ω, not
 /// per wheel, so its values are a looser match); payload time vs `time_s` and the loaded map's θ1 vs
 /// `theta1_after`; a slippery floor's μ g (1 − b/x_c) (the driven wheels' share of the weight)
-/// vs `accel_max`. Everything else is `n/a`.
+/// vs `accel_max` and μ r/x_c (the centre of mass at the axle's height) vs `load_transfer`.
+/// Everything else is `n/a`.
 pub fn magnitudes(
     p: &PhysicalProfile,
     truth: &BTreeMap<String, BTreeMap<String, f64>>,
@@ -444,12 +445,22 @@ pub fn magnitudes(
             }
             // The driven wheels carry the weight less the caster's share b/x_c (statics of
             // the chassis on its three contacts): the floor passes at most μ g (1 − b/x_c).
-            "floor_mu" => push(
-                "μ g (1 − b/x_c) vs accel_max",
-                g("mu") * 9.81 * (1.0 - p.b / p.caster_x),
-                est("accel_max"),
-                false,
-            ),
+            // Accelerating, the centre of mass at the axle's height r moves the load
+            // m a r/x_c onto the wheels: the load transfer μ r/x_c.
+            "floor_mu" => {
+                push(
+                    "μ g (1 − b/x_c) vs accel_max",
+                    g("mu") * 9.81 * (1.0 - p.b / p.caster_x),
+                    est("accel_max"),
+                    false,
+                );
+                push(
+                    "μ r/x_c vs load_transfer",
+                    g("mu") * p.r / p.caster_x,
+                    est("load_transfer"),
+                    false,
+                );
+            }
             "payload" => {
                 push("at_s vs time_s", g("at_s"), est("time_s"), false);
                 push(
