@@ -37,8 +37,9 @@
 # 2971-3070 once at 7f8be6a (four nominees); 1029 (single, clean; pairs window_end) and clean
 # 3071-3170 once at 998fcf9 (fingerprints' variance from the Gauss-Newton step's residual);
 # 1030 (single, clean; pairs window_end) and clean 3171-3270 once at 31ac733 (the search
-# goes on below 99.5 %, effects of one quantity are alternatives); the next report takes
-# 1031.. and 3271.. .
+# goes on below 99.5 %, effects of one quantity are alternatives); 1031 (single, clean; pairs
+# window_end) and clean 3271-3370 once at 2ab5b4b (the traction limit's load transfer, τ/80
+# traction steps); the next report takes 1032.. and 3371.. .
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
