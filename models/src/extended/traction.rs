@@ -131,7 +131,8 @@ impl Ros2Matrix {
     }
 }
 
-/// The contact's constants for θ = `th`: the limit c, the slip scale s0, ε, κ and d/2.
+/// The contact's constants for θ = `th`: the limit c, the slip scale s0, ε, κ, the load
+/// transfer p and d/2.
 #[derive(Debug, Clone, Copy)]
 struct Contact {
     /// Largest wheel force c = (1 − ε) θ1 a_max [m/s].
@@ -402,6 +403,8 @@ mod tests {
         }
     }
 
+    /// The closed forms above under load transfer `p`: a fitted a_max of 0.2 m/s² is
+    /// 0.2/(1 − p) while both wheels slip forward.
     fn beyond_the_grip(p: f64) {
         let (a, eps, u) = (0.2 / (1.0 - p), 0.1, 1.0);
         let rec = recording(1000, 0.02, |_| (u, 0.0));
