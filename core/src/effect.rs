@@ -83,7 +83,8 @@ pub struct Terms {
 /// p = μ h/x_c, positive where the caster is ahead (pulling forward loads the wheels): on the
 /// physics backend's Khepera-like robot on a floor of μ ≈ 0.2, p ≈ 0.10 — 10 % more grip
 /// accelerating, 10 % less braking (the axle loads of a vehicle under traction: J. Y. Wong,
-/// *Theory of Ground Vehicles*, 4th ed. (2008) §3.1). In grip (s → 0) the sum of each pair is eq. 2.19. Source: the rigid-wheel/Coulomb-contact picture of Siegwart & Nourbakhsh,
+/// *Theory of Ground Vehicles*, 4th ed. (2008) §3.1). In grip (s → 0) the sum of each pair
+/// is eq. 2.19. Source: the rigid-wheel/Coulomb-contact picture of Siegwart & Nourbakhsh,
 /// *Introduction to Autonomous Mobile Robots* (2011) §3.2 (a wheel rolls without slipping only
 /// while the floor can pass its force), with the thesis's eq. 2.19 as the gripping limit.
 #[derive(Debug, Clone, Copy, PartialEq)]
