@@ -200,6 +200,7 @@ pub fn robot_profile(
 /// min_improvement = 0.05
 /// max_effects = 3
 /// track_m = 0.555     # wheel track for wheel_asymmetry
+/// search_samples = 3600  # a longer recording is searched on an excerpt, then refitted whole
 /// plot = "diagnosis"  # directory for the PNGs
 /// ```
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
@@ -223,6 +224,8 @@ pub struct DiagnoseConfig {
     pub max_effects: Option<usize>,
     /// Wheel track \[m\].
     pub track_m: Option<f64>,
+    /// Most samples per recording the search runs on (`DiagnoseSettings::search_samples`).
+    pub search_samples: Option<usize>,
     /// Directory for the plots.
     pub plot: Option<PathBuf>,
 }
@@ -240,6 +243,7 @@ impl DiagnoseConfig {
         s.min_improvement = self.min_improvement.unwrap_or(s.min_improvement);
         s.max_effects = self.max_effects.unwrap_or(s.max_effects);
         s.track_m = self.track_m.or(s.track_m);
+        s.search_samples = self.search_samples.unwrap_or(s.search_samples);
         s
     }
 }

@@ -442,6 +442,15 @@ fn diagnosis_fit_and_test(s: &mut String, d: &Diagnosis) {
         d.split.blocks / 2,
         d.split.blocks
     );
+    let whole = d.split.training_s + d.split.validation_s;
+    if d.split.searched_s < whole - 1e-6 {
+        let _ = writeln!(
+            s,
+            "   The candidates were screened and fitted on {:.0} s of the {:.0} s, in windows \
+             spread over each long recording; the model found was refitted on all of it.",
+            d.split.searched_s, whole
+        );
+    }
     let names = ["θ1", "θ2", "θ3", "θ4", "θ5", "θ6"];
     let _ = writeln!(
         s,

@@ -278,11 +278,12 @@ impl FitData<'_> {
             })
             .fold(0.0f64, |a, x| a.max(x.abs()))
     }
-    /// Longest recording \[s\].
+    /// Longest drive \[s\]: from a recording's drive start ([`Recording::drive_start`]) to its
+    /// last sample.
     pub fn span_s(&self) -> f64 {
         self.recordings
             .iter()
-            .map(|r| r.t[r.len() - 1] - r.t[0])
+            .map(|r| r.t[r.len() - 1] - r.drive_start())
             .fold(0.0f64, f64::max)
     }
     /// The longest mean sample period over the recordings \[s\] (0 without two samples).

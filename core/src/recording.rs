@@ -140,6 +140,9 @@ pub struct Recording {
     pub wr: Option<Vec<f64>>,
 }
 
+/// Metadata key of [`Recording::drive_start`] (seconds, in the recording's time base).
+pub const DRIVE_START: &str = "drive_start_s";
+
 const REQUIRED: [&str; 5] = ["t", "v_ref", "w_ref", "v", "w"];
 const OPTIONAL: [&str; 5] = ["x", "y", "phi", "wl", "wr"];
 
@@ -201,12 +204,25 @@ impl Recording {
     /// The first `n` samples (all of them when `n ≥ len`), with the same source and metadata:
     /// the head of a long drive, e.g. for a quick fit to start a long one from.
     pub fn head(&self, n: usize) -> Self {
-        let n = n.min(self.len());
-        let cut = |c: &[f64]| c[..n].to_vec();
+        self.window(0..n)
+    }
+
+    /// The samples `range` (clipped to the recording), with the same source and metadata and
+    /// their own times: an excerpt of a long drive, e.g. the windows a diagnosis searches on.
+    /// A window that starts after the first sample records the drive's start
+    /// ([`Recording::drive_start`]) in its metadata, so that a drift keeps its origin.
+    pub fn window(&self, range: std::ops::Range<usize>) -> Self {
+        let end = range.end.min(self.len());
+        let start = range.start.min(end);
+        let cut = |c: &[f64]| c[start..end].to_vec();
         let cut_opt = |c: &Option<Vec<f64>>| c.as_deref().map(cut);
+        let mut meta = self.meta.clone();
+        if start > 0 && self.meta(DRIVE_START).is_none() {
+            meta.push((DRIVE_START.to_owned(), format!("{}", self.drive_start())));
+        }
         Self {
             source: self.source.clone(),
-            meta: self.meta.clone(),
+            meta,
             t: cut(&self.t),
             v_ref: cut(&self.v_ref),
             w_ref: cut(&self.w_ref),
@@ -235,6 +251,18 @@ impl Recording {
             .rev()
             .find(|(k, _)| k == key)
             .map(|(_, v)| v.as_str())
+    }
+
+    /// The first instant of the drive this recording was cut from \[s\]: the metadata
+    /// [`DRIVE_START`] where a cut set it ([`Recording::window`]), else the first sample's time
+    /// (NaN for an empty recording). A drift over the drive (a battery's sagging gain) counts
+    /// from it.
+    pub fn drive_start(&self) -> f64 {
+        self.meta(DRIVE_START)
+            .and_then(|s| s.trim().parse().ok())
+            .filter(|x: &f64| x.is_finite())
+            .or_else(|| self.t.first().copied())
+            .unwrap_or(f64::NAN)
     }
 
     /// Sets (or replaces) metadata `key`.
@@ -585,6 +613,36 @@ mod tests {
         assert_eq!(r.command_hold(), CommandHold::Zoh);
         assert_eq!(r.v, vec![3.0; 3]);
         assert!(r.x.is_none());
+    }
+
+    /// A window keeps its samples' times and the drive's start (set once, by the first cut
+    /// that leaves the first sample out; the head keeps the metadata as it was), and a window
+    /// of a window keeps the first cut's start.
+    #[test]
+    fn a_window_keeps_its_times_and_the_drives_start() {
+        let t: Vec<f64> = (0..10).map(|k| 5.0 + 0.5 * f64::from(k)).collect();
+        let r = Recording::new(
+            "d",
+            t.clone(),
+            vec![0.0; 10],
+            vec![0.0; 10],
+            vec![1.0; 10],
+            vec![2.0; 10],
+        )
+        .expect("valid");
+        assert_eq!(r.drive_start(), 5.0);
+        let head = r.head(4);
+        assert_eq!(head.meta(DRIVE_START), None);
+        assert_eq!(head.t, t[..4]);
+        let w = r.window(3..7);
+        assert_eq!(w.t, t[3..7]);
+        assert_eq!(w.v, vec![1.0; 4]);
+        assert_eq!(w.drive_start(), 5.0);
+        let ww = w.window(1..3);
+        assert_eq!(ww.t, t[4..6]);
+        assert_eq!(ww.drive_start(), 5.0);
+        assert_eq!(r.window(8..20).len(), 2);
+        assert!(r.window(12..20).is_empty());
     }
 
     #[test]

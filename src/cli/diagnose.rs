@@ -40,6 +40,11 @@ pub(crate) struct DiagnoseArgs {
     /// Wheel track \[m\] for wheel_asymmetry (default: from the recording's metadata).
     #[arg(long)]
     track: Option<f64>,
+    /// Most samples per recording the search screens and fits candidates on (default 3600):
+    /// a longer recording is searched on windows spread over it, and the model found is
+    /// refitted on all of it.
+    #[arg(long)]
+    search_samples: Option<usize>,
     /// Write PNG plots into this directory.
     #[arg(long)]
     plot: Option<PathBuf>,
@@ -70,6 +75,7 @@ pub(crate) fn run_diagnose(a: DiagnoseArgs) -> Result<()> {
     settings.max_effects = a.max_effects.unwrap_or(settings.max_effects);
     settings.alpha = a.alpha.unwrap_or(settings.alpha);
     settings.track_m = a.track.or(settings.track_m);
+    settings.search_samples = a.search_samples.unwrap_or(settings.search_samples);
     let files: Vec<PathBuf> = if a.files.is_empty() {
         cfg.files.iter().map(|f| base.join(f)).collect()
     } else {

@@ -177,6 +177,7 @@ pub(super) fn assemble(
             blocks: settings.blocks,
             training_s: seconds_of(&data.train),
             validation_s: seconds_of(&data.valid),
+            searched_s: out.searched_s,
         },
         tests: out.tests,
         // The verdict: a model extended, or something left unexplained. First-round evidence

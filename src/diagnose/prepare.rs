@@ -11,8 +11,8 @@ pub(super) struct Data {
     /// Validation flags.
     pub(super) valid: Vec<Vec<bool>>,
     pub(super) dt: f64,
-    /// Blocks per recording.
-    pub(super) blocks: usize,
+    /// Blocks of each recording (an excerpt's window is one block).
+    pub(super) blocks: Vec<usize>,
     pub(super) track: Option<f64>,
     /// 1/σ_c of the nominal fit.
     pub(super) weight: [f64; 2],
@@ -173,7 +173,8 @@ impl Data {
     pub(super) fn block(&self) -> usize {
         self.recs
             .iter()
-            .map(|r| r.len() / self.blocks)
+            .zip(&self.blocks)
+            .map(|(r, b)| r.len() / b)
             .min()
             .unwrap_or(1)
             .max(1)
@@ -456,7 +457,7 @@ pub(super) fn prepare(
         train,
         valid,
         dt,
-        blocks: settings.blocks,
+        blocks: vec![settings.blocks; recordings.len()],
         track,
         weight,
         accel,

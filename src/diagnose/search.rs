@@ -15,6 +15,8 @@ pub(super) struct Outcome {
     /// The first round's test family.
     pub(super) tests: Vec<TestResult>,
     pub(super) mismatch: bool,
+    /// Seconds of data searched on.
+    pub(super) searched_s: f64,
 }
 
 /// One round's tests: the nominees and which the Holm family nominates, with the basis of
@@ -613,6 +615,7 @@ pub(super) fn run(
         rounds: Vec::new(),
         tests: Vec::new(),
         mismatch: false,
+        searched_s: data.recs.iter().map(Recording::len).sum::<usize>() as f64 * data.dt,
     };
     let mut tried: Vec<Candidate> = Vec::new();
     for round_no in 0..=settings.max_effects {

@@ -752,6 +752,7 @@ impl<'a> Run<'a> {
                 ph,
                 track,
                 t0: rec.t[0],
+                origin: rec.drive_start(),
             },
         })
     }
@@ -781,8 +782,10 @@ struct Setpoints<'a> {
     ph: &'a Terms,
     /// Wheel track \[m\].
     track: f64,
-    /// The recording's first instant \[s\] (the drift's origin).
+    /// The recording's first instant \[s\].
     t0: f64,
+    /// The drift's origin: the drive's first instant \[s\] ([`Recording::drive_start`]).
+    origin: f64,
 }
 
 impl Setpoints<'_> {
@@ -830,7 +833,7 @@ impl Setpoints<'_> {
             uv = (vr + vl) / 2.0;
             uw = (vr - vl) / d;
         }
-        let g = 1.0 + ph.drift * (t - self.t0);
+        let g = 1.0 + ph.drift * (t - self.origin);
         [uv * g, uw * g]
     }
 
@@ -861,7 +864,7 @@ impl Setpoints<'_> {
     fn shaped<const M: usize>(&self, c: &Cmd<M>, t: f64) -> Cmd<M> {
         let mut out = *c;
         out.u = self.shape(c.u, t);
-        out.g = 1.0 + self.ph.drift * (t - self.t0);
+        out.g = 1.0 + self.ph.drift * (t - self.origin);
         if c.live {
             for j in 0..M {
                 let col = self.shape([c.du[0][j], c.du[1][j]], t);

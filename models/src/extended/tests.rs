@@ -357,3 +357,36 @@ fn a_larger_tyre_is_the_amplifier_asymmetry_with_its_wheels_row_scaled() {
         assert!((yt[ch][1] - ya[ch][1]).abs() > 1e-4, "{ch}");
     }
 }
+
+/// A drive gain drifting over the drive (`gain_drift`, g = 1 + r (t − t_drive)) counts from the
+/// drive's start in a window cut from it ([`Recording::window`]): the window, started from the
+/// whole run's state at its first sample, is the whole run's simulation there (to the
+/// integration's rounding); counted from the window's own start, it would be off by the gain
+/// the drive has lost by then (r · 5 s = 10 % here).
+#[test]
+fn a_drift_counts_from_the_drives_start_in_a_window() {
+    let rec = recording(false, 120, |x| {
+        (0.3 + 0.2 * (1.1 * x).sin(), 0.8 * (0.6 * x).cos())
+    });
+    let e = Extended::new(&[Candidate::GAIN_DRIFT], 0.34).expect("model");
+    let mut th = THETA.to_vec();
+    th.push(-0.02);
+    let whole = e.simulate(&th, &rec, &[0.1, 0.05]).expect("sim");
+    let start = 50;
+    let window = rec.window(start..120);
+    assert_eq!(window.drive_start(), 0.0);
+    let x0 = [whole[0][start], whole[1][start]];
+    let part = e.simulate(&th, &window, &x0).expect("sim");
+    for ch in 0..2 {
+        for k in 0..window.len() {
+            approx::assert_abs_diff_eq!(part[ch][k], whole[ch][start + k], epsilon = 1e-9);
+        }
+    }
+    let mut own = window.clone();
+    own.meta.retain(|(key, _)| key != wheelid_core::DRIVE_START);
+    let off = e.simulate(&th, &own, &x0).expect("sim");
+    let gap = (0..own.len())
+        .map(|k| (off[0][k] - whole[0][start + k]).abs())
+        .fold(0.0, f64::max);
+    assert!(gap > 1e-3, "counted from the window's start: {gap}");
+}
