@@ -39,7 +39,10 @@
 # 1030 (single, clean; pairs window_end) and clean 3171-3270 once at 31ac733 (the search
 # goes on below 99.5 %, effects of one quantity are alternatives); 1031 (single, clean; pairs
 # window_end) and clean 3271-3370 once at 2ab5b4b (the traction limit's load transfer, τ/80
-# traction steps); the next report takes 1032.. and 3371.. .
+# traction steps); 1032 at --duration 600 (single, clean: all three conventions; pairs
+# window_end) once at 1d4732e (a long recording searched on an excerpt; seed 3's 600 s
+# Khepera singles at window_end were looked at while building it); the next report takes
+# 1033.. and 3371.. .
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
