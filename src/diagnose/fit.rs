@@ -87,7 +87,6 @@ pub(super) fn fit_candidate(
         mut pinned,
         ..
     } = start;
-    let frame = data.frame();
     let (t_lo, t_hi) = data.span();
     let margin = 0.05 * (t_hi - t_lo);
     let run = |theta: &[f64], pinned: &[usize]| fit_pinned(data, &model, theta, pinned, &bounds);
@@ -140,16 +139,17 @@ pub(super) fn fit_candidate(
         // next training block makes the cost fall by 10⁻⁴ at a validation block's end: a
         // fixed 10⁻⁶ took that for the minimum and placed a change at 75.9 s at 93.8 s.)
         let n_eff = simulate_all(&model, &full, &data.recs, &fit.initial)
-            .map_or(1.0, |y| data.effective_samples_on(&y, &data.train))
+            .map_or(1.0, |y| data.effective_samples_on(&y, &data.placing))
             .max(1.0);
         let tolerance = (CHI2_1_95 / n_eff).exp_m1();
+        let placing = data.placing_frame();
         let (lo, hi) = flat_minimum(
             (-16..=16).map(|i| (t0 + step * i as f64 / 16.0).clamp(t_lo + margin, t_hi - margin)),
             |t| {
                 let mut th = full.clone();
                 th[base] = t;
                 simulate_all(&model, &th, &data.recs, &fit.initial)
-                    .map_or(f64::INFINITY, |y| frame.residuals(&y).norm_squared())
+                    .map_or(f64::INFINITY, |y| placing.residuals(&y).norm_squared())
             },
             tolerance,
         );

@@ -10,6 +10,10 @@ pub(super) struct Data {
     pub(super) train: Vec<Vec<bool>>,
     /// Validation flags.
     pub(super) valid: Vec<Vec<bool>>,
+    /// The training samples that place a change time: all of them, but for an excerpt's
+    /// lead-ins, which fit their window's initial state and say next to nothing of which
+    /// dynamics are in force ([`super::excerpt`]).
+    pub(super) placing: Vec<Vec<bool>>,
     pub(super) dt: f64,
     /// Blocks of each recording (an excerpt's window is one block).
     pub(super) blocks: Vec<usize>,
@@ -31,6 +35,14 @@ impl Data {
         Frame {
             recs: &self.recs,
             mask: &self.train,
+            weight: self.weight,
+        }
+    }
+    /// The rows that place a change time ([`Data::placing`]).
+    pub(super) fn placing_frame(&self) -> Frame<'_> {
+        Frame {
+            recs: &self.recs,
+            mask: &self.placing,
             weight: self.weight,
         }
     }
@@ -454,6 +466,7 @@ pub(super) fn prepare(
     let weight = [0, 1].map(|c| 1.0 / fit.noise_std[c].max(1e-12));
     let data = Data {
         recs,
+        placing: train.clone(),
         train,
         valid,
         dt,
