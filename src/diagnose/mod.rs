@@ -70,11 +70,10 @@
 //! the drive, each a recording of its own whose first samples fit its initial state, a drift
 //! counted from the drive's start ([`wheelid_core::Recording::drive_start`]). The model found
 //! is refitted on every training block of the whole drive, which step 6 judges (`excerpt`). On
-//! 10-minute recordings of the physics backend (hold-out seed 1032) it named 66/66 single
-//! effects and clean runs and 82/90 pairs right; the whole-drive search, 5 of 6 pairs where
-//! the excerpt named 4 (a payload dropped inside a validation block). Tuning seed 3's
-//! Khepera-like singles took 3.8–14.7 s a run searched whole (a slippery floor 378 s),
-//! 0.6–1.9 s on the excerpt (the floor 9.6 s).
+//! 10-minute recordings of the physics backend (seed 1032) it named 66/66 single effects and
+//! clean runs and 82/90 pairs right; where the whole-drive search was affordable (six pairs),
+//! the same 5 of 6. Tuning seed 3's Khepera-like singles took 3.8–14.7 s a run searched whole
+//! (a slippery floor 378 s), 0.6–1.9 s on the excerpt (the floor 9.6 s).
 
 mod accept;
 mod assemble;
