@@ -4,18 +4,19 @@
 //! drift over the drive stays in view; the model the search ends with is refitted on every
 //! training block of the whole drive, which the report then judges.
 //!
-//! The samples are taken in windows that start in a training block, each a recording of its
-//! own with its times and flags kept, so that the fits can estimate its initial state (a
-//! window of validation samples alone would leave it free; these lead-ins do not place a
-//! change time, `Data::placing`: a payload dropped at 370.6 s inside a validation block was
-//! placed at 464.7 s by lead-ins at 413 s and 447 s, and its validation cost rose by 51 %):
-//! in each training block, three
-//! windows of N/(3B) samples at the middles of its thirds, the last moved to the block's end
-//! and carried on for N/B samples into the validation block after it. Ten minutes at 50 Hz
-//! in five blocks, searched on 3 600 samples: windows of 4.8 s at 20, 60, 260, 300, 500,
-//! 540 and 595 s, and of 4.8 + 14.4 s across the training–validation boundaries at 120 s
-//! and 360 s (a payload set down or a battery sagging between them is seen at seven
-//! times, not three).
+//! The drive is cut into 3B equal slots, and each slot gives one window of N/(3B) samples,
+//! at a place in the slot that steps by the golden ratio (evenly spaced windows alias with a
+//! periodic excitation: every 40 s of a 60 s multisine saw three of its phases and missed
+//! where v_ref peaks, so a velocity limit was fitted on ω alone). Each window is a recording
+//! of its own with its times and flags kept, started in the model in hand's free run; its
+//! first [`LEAD_SAMPLES`] are flagged for training, so that a fit can estimate its initial
+//! state (a window of validation samples alone would leave it free). Those lead-ins do not
+//! place a change time (`Data::placing`): a payload dropped at 370.6 s inside a validation
+//! block was placed at 464.7 s by lead-ins at 413 s and 447 s, and its validation cost rose by
+//! 51 %. A drift counts from the drive's start, which each window carries
+//! ([`wheelid_core::Recording::drive_start`]; counted from each window's own start, a sagging
+//! battery was named a payload change). Ten minutes at 50 Hz in five blocks, searched on
+//! 3 600 samples: fifteen windows of 4.8 s, one in every 40 s.
 
 use super::*;
 
