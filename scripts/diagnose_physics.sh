@@ -41,8 +41,9 @@
 # window_end) and clean 3271-3370 once at 2ab5b4b (the traction limit's load transfer, τ/80
 # traction steps); 1032 at --duration 600 (single, clean: all three conventions; pairs
 # window_end) once at 1d4732e (a long recording searched on an excerpt; seed 3's 600 s
-# Khepera singles at window_end were looked at while building it); the next report takes
-# 1033.. and 3371.. .
+# Khepera singles at window_end were looked at while building it, then 1032 itself: its
+# payload miss led to ac3a40b); 1033 at --duration 600 (single, clean, pairs; window_end)
+# once at ac3a40b (the excerpt then made opt-in); the next report takes 1034.. and 3371.. .
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
