@@ -49,8 +49,9 @@ impl Data {
         let mut origin = Vec::new();
         for (i, rec) in self.recs.iter().enumerate() {
             let (n, blocks) = (rec.len(), self.blocks[i]);
-            let windows: Vec<(std::ops::Range<usize>, usize)> = if n <= cap {
-                vec![(0..n, blocks)]
+            // (samples, blocks spanned, lead-in samples flagged for training)
+            let windows: Vec<(std::ops::Range<usize>, usize, usize)> = if n <= cap {
+                vec![(0..n, blocks, 0)]
             } else {
                 let k = WINDOWS_PER_BLOCK * blocks;
                 let w = cap / k;
@@ -64,12 +65,11 @@ impl Data {
                         let free = (slot.1 - slot.0).saturating_sub(w);
                         let at = ((j + 1) as f64 * GOLDEN).fract();
                         let start = slot.0 + (at * free as f64) as usize;
-                        (start..(start + w).min(n), 1)
+                        (start..(start + w).min(n), 1, LEAD_SAMPLES)
                     })
                     .collect()
             };
-            for (range, blocks) in windows {
-                let lead = if blocks == 1 { LEAD_SAMPLES } else { 0 };
+            for (range, blocks, lead) in windows {
                 let flag = |mask: &[bool], lead_flag: bool| -> Vec<bool> {
                     mask[range.clone()]
                         .iter()
@@ -82,7 +82,7 @@ impl Data {
                 data.placing.push(self.placing[i][range.clone()].to_vec());
                 data.valid.push(flag(&self.valid[i], false));
                 data.accel
-                    .push(self.accel[i].clone().map(|c| c[range.clone()].to_vec()));
+                    .push([0, 1].map(|c| self.accel[i][c][range.clone()].to_vec()));
                 data.blocks.push(blocks);
                 origin.push((i, range.start));
             }
