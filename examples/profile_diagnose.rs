@@ -3,7 +3,8 @@
 //! profile of where a diagnosis spends its time (the benchmark is `cargo bench --bench
 //! diagnose`).
 //!
-//! Run: `cargo run --release --example profile_diagnose [CASE…]` (no case: all of them).
+//! Run: `cargo run --release --example profile_diagnose [--search-samples=N] [CASE…]` (no
+//! case: all of them; `--search-samples`: `DiagnoseSettings::search_samples`).
 
 use std::sync::Mutex;
 use std::time::Instant;
@@ -151,8 +152,20 @@ fn cases() -> Vec<(&'static str, Effects)> {
 }
 
 fn main() {
-    let wanted: Vec<String> = std::env::args().skip(1).collect();
-    let settings = DiagnoseSettings::default();
+    let mut settings = DiagnoseSettings::default();
+    let mut wanted: Vec<String> = Vec::new();
+    for arg in std::env::args().skip(1) {
+        match arg.strip_prefix("--search-samples=") {
+            Some(n) => match n.parse() {
+                Ok(n) => settings.search_samples = n,
+                Err(e) => {
+                    eprintln!("--search-samples={n}: {e}");
+                    std::process::exit(2);
+                }
+            },
+            None => wanted.push(arg),
+        }
+    }
     for (name, effects) in cases() {
         if !wanted.is_empty() && !wanted.iter().any(|w| w == name) {
             continue;

@@ -29,6 +29,7 @@ fn run_one(
         jitter: 0.0,
         candidates: None,
         cache: None,
+        search_samples: None,
     };
     let r = run_all(std::slice::from_ref(&spec), 1, &|_, _| {})
         .pop()
@@ -66,6 +67,7 @@ fn a_clean_and_a_latency_run_of_the_khepera_complete_and_the_latency_is_a_mismat
         jitter: 0.0,
         candidates: None,
         cache: None,
+        search_samples: None,
     };
     let specs = [spec(vec![]), spec(vec!["latency"])];
     let recs = run_all(&specs, 2, &|_, _| {});
@@ -201,6 +203,7 @@ fn a_floor_behind_a_rate_limit_acts() {
         jitter: 0.0,
         candidates: None,
         cache: None,
+        search_samples: None,
     };
     let specs = [
         spec(vec!["rate_limit", "floor_mu"]),

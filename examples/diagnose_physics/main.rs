@@ -157,6 +157,8 @@ pub struct RunSpec {
     pub candidates: Option<Vec<String>>,
     /// Directory of simulated recordings to reuse (`None`: always simulate).
     pub cache: Option<PathBuf>,
+    /// The diagnosis's `search_samples` (`None`: its default).
+    pub search_samples: Option<usize>,
 }
 
 impl RunSpec {
@@ -468,6 +470,9 @@ fn run_into(spec: &RunSpec, cache: &CleanRuns, rec: &mut Record) -> Result<()> {
         track_m: Some(p.d),
         ..DiagnoseSettings::default()
     };
+    if let Some(n) = spec.search_samples {
+        ds.search_samples = n;
+    }
     if let Some(names) = &spec.candidates {
         ds.candidates = names
             .iter()
@@ -682,6 +687,10 @@ pub struct Args {
     /// fresh directory.
     #[arg(long)]
     pub cache: Option<PathBuf>,
+    /// Search a recording longer than this many samples on an excerpt of them
+    /// (`DiagnoseSettings::search_samples`; default: the diagnosis's own).
+    #[arg(long)]
+    pub search_samples: Option<usize>,
 }
 
 /// The runs `a` asks for: profile × convention × case × seed.
@@ -728,6 +737,7 @@ pub fn plan(a: &Args) -> Result<Vec<RunSpec>> {
                         jitter: a.jitter,
                         candidates: a.candidates.clone(),
                         cache: a.cache.clone(),
+                        search_samples: a.search_samples,
                     });
                 }
             }
