@@ -328,7 +328,9 @@ fn first_accepted(
     let mut first_start = f64::INFINITY;
     let now = data.frame().residuals(&cur.sim).norm_squared();
     let misfit = above_floor(&round.fits).iter().any(|&a| a);
-    for (i, st) in ready {
+    let mut fits = Ahead::new(ready);
+    for pos in 0..fits.len() {
+        let (i, start_cost) = fits.nominee(pos);
         let c = round.nominees[i].pattern.candidate;
         // The strongest fingerprint is fitted even past MORE_FITS: its screened start (θ held
         // at the nominal fit, which has absorbed part of the effect) may rank it late.
@@ -336,7 +338,7 @@ fn first_accepted(
             continue;
         }
         let accepted = best.is_some().then_some(first_start);
-        if let Some(reason) = not_fitted(c, (st.cost, now), accepted, misfit, settings) {
+        if let Some(reason) = not_fitted(c, (start_cost, now), accepted, misfit, settings) {
             rejected.push(Rejected {
                 effect: c.name().into(),
                 reason,
@@ -346,9 +348,22 @@ fn first_accepted(
         if best.is_some() {
             more += 1;
         }
-        let start_cost = st.cost;
         progress.step(&format!("fitting {}", c.name()), 1);
-        match fit_and_judge(&context, i, st) {
+        // The next candidate that will be fitted whatever this one's verdict is fitted beside
+        // it, on the other core (the fits are independent; the order of the verdicts is kept).
+        let next = (best.is_none() || more < MORE_FITS)
+            .then(|| {
+                let least = first_start.min(start_cost);
+                (pos + 1..fits.len()).find(|&q| {
+                    let (j, cost) = fits.nominee(q);
+                    let cq = round.nominees[j].pattern.candidate;
+                    cost / least <= RIVAL_START_FACTOR
+                        && not_fitted(cq, (cost, now), Some(least), misfit, settings).is_none()
+                        && not_fitted(cq, (cost, now), None, misfit, settings).is_none()
+                })
+            })
+            .flatten();
+        match fits.fit(&context, pos, next) {
             Ok(x) => {
                 first_start = first_start.min(start_cost);
                 let score = information(n_eff, x.3, free_params(c, &x.1));
@@ -373,6 +388,63 @@ fn first_accepted(
         }
     }
     best.map(|(_, x)| x)
+}
+
+/// The screened candidates of a round in the order they are fitted, and the fits done ahead
+/// of their turn ([`first_accepted`]).
+struct Ahead {
+    /// (nominee, its screened start; `None` once fitted).
+    starts: Vec<(usize, f64, Option<Start>)>,
+    done: Vec<Option<std::result::Result<Accepted, String>>>,
+}
+
+impl Ahead {
+    fn new(ready: Vec<(usize, Start)>) -> Self {
+        Self {
+            done: ready.iter().map(|_| None).collect(),
+            starts: ready
+                .into_iter()
+                .map(|(i, st)| (i, st.cost, Some(st)))
+                .collect(),
+        }
+    }
+
+    fn len(&self) -> usize {
+        self.starts.len()
+    }
+
+    /// The nominee at `pos` and its screened start's training cost.
+    fn nominee(&self, pos: usize) -> (usize, f64) {
+        (self.starts[pos].0, self.starts[pos].1)
+    }
+
+    /// The fit and verdict of the candidate at `pos` ([`fit_and_judge`]), with the one at
+    /// `next` fitted beside it on another thread when it is not done yet.
+    fn fit(
+        &mut self,
+        cx: &Context<'_>,
+        pos: usize,
+        next: Option<usize>,
+    ) -> std::result::Result<Accepted, String> {
+        if let Some(done) = self.done[pos].take() {
+            return done;
+        }
+        let mut take = |q: usize| (self.starts[q].0, self.starts[q].2.take());
+        let (i, st) = take(pos);
+        let st = st.ok_or("fitted twice")?;
+        let ahead = next.map(&mut take).and_then(|(j, st)| st.map(|st| (j, st)));
+        let Some((j, st_next)) = ahead else {
+            return fit_and_judge(cx, i, st);
+        };
+        let (now, then) = rayon::join(
+            || fit_and_judge(cx, i, st),
+            || fit_and_judge(cx, j, st_next),
+        );
+        if let Some(q) = next {
+            self.done[q] = Some(then);
+        }
+        now
+    }
 }
 
 /// A nominee accepted in a round: its index, the extended model, its validation fits and the
