@@ -100,17 +100,23 @@ pub(super) fn fit_candidate(
             .map(|c| (r.0.noise_std[c] * data.weight[c]).powi(2))
             .sum::<f64>()
     };
-    let mut first = run(&theta, &pinned);
     // A rate limit the nominal model lacks is traded for a slower lag (θ1, θ2 too large, a
     // limit then hardly binds): the fit also runs from the active channels' θ1, θ2 shortened
-    // (a coarse grid with the level, then the level's grid), the better fit kept. Not in the
-    // screen: a fast lag with a ramp also imitates a dead time, which must still rank first
-    // where it is one.
+    // (a coarse grid with the level, then the level's grid), the better fit kept; the two
+    // fits run side by side. Not in the screen: a fast lag with a ramp also imitates a dead
+    // time, which must still rank first where it is one.
     let active: Vec<usize> = (0..2).filter(|j| !pinned.contains(&(base + j))).collect();
-    let alternative = (search == Search::Limit { rate: true })
-        .then(|| shortened_lags(data, cur, &model, &theta, base, &active));
-    if let Some(alt) = alternative
-        && let Ok(r) = run(&alt, &pinned)
+    let (mut first, alternative) = rayon::join(
+        || run(&theta, &pinned),
+        || {
+            (search == Search::Limit { rate: true }).then(|| {
+                let alt = shortened_lags(data, cur, &model, &theta, base, &active);
+                let r = run(&alt, &pinned);
+                (alt, r)
+            })
+        },
+    );
+    if let Some((alt, Ok(r))) = alternative
         && first.as_ref().map_or(true, |f| cost(&r) < cost(f))
     {
         first = Ok(r);
@@ -182,32 +188,32 @@ pub(super) fn fit_candidate(
 }
 
 /// A fit from θ with the given parameters pinned, or why it failed.
-type FitFrom<'a> = dyn Fn(&[f64], &[usize]) -> std::result::Result<PinnedFit, String> + 'a;
+type FitFrom<'a> = dyn Fn(&[f64], &[usize]) -> std::result::Result<PinnedFit, String> + Sync + 'a;
 
 /// A two-channel candidate whose channels cannot be told apart (one never acts): fitted with
 /// each channel alone (the other pinned at its `null` value), the cheaper fit kept with its
 /// pinned parameters; `None` if both fail.
 fn each_channel_alone(
     run: &FitFrom<'_>,
-    cost: &dyn Fn(&PinnedFit) -> f64,
+    cost: &(dyn Fn(&PinnedFit) -> f64 + Sync),
     theta: &[f64],
     pinned: &[usize],
     base: usize,
     null: &[f64],
 ) -> Option<(PinnedFit, Vec<usize>)> {
-    let mut best: Option<(PinnedFit, Vec<usize>)> = None;
-    for j in 0..2 {
+    let alone = |j: usize| {
         let mut p = pinned.to_vec();
         p.push(base + j);
         let mut th = theta.to_vec();
         th[base + j] = null[j];
-        if let Ok(r) = run(&th, &p)
-            && best.as_ref().is_none_or(|b| cost(&r) < cost(&b.0))
-        {
-            best = Some((r, p));
-        }
+        run(&th, &p).ok().map(|r| (r, p))
+    };
+    // Side by side; v's kept on a tie, as in order.
+    let (v, w) = rayon::join(|| alone(0), || alone(1));
+    match (v, w) {
+        (Some(v), Some(w)) => Some(if cost(&w.0) < cost(&v.0) { w } else { v }),
+        (v, w) => v.or(w),
     }
-    best
 }
 
 /// A rate limit the nominal model lacks is traded for a slower lag (θ1, θ2 too large, a limit
