@@ -78,6 +78,59 @@ fn dry_friction_in_the_wheel_joints_is_named_wheel_friction() {
     }
 }
 
+/// A dry friction torque F in each wheel joint of a v/ω-PD robot (thesis Appendix A.3) is, in
+/// steady state, a setpoint offset of c_v = R_a F / (k_a K_PT) in v and c_ω = R_a F / (k_a K_PR)
+/// in ω: the v loop balances the friction's common part, the ω loop its difference, each with
+/// its own gain (the proportional voltage must cover R_a F / k_a per wheel).
+fn c_vw(p: &PhysicalProfile, f: f64) -> (f64, f64) {
+    let Controller::VwPd { k_pt, k_pr, .. } = p.controller else {
+        panic!("a v/ω-PD profile");
+    };
+    let volts = f * p.r_a / p.k_a;
+    (volts / k_pt, volts / k_pr)
+}
+
+/// Dry friction in the wheel joints of the Pioneer-like robot (v/ω-PD), 4–10 % of its top
+/// speed in v's setpoint terms, is named `vw_friction` — per wheel, met by the v and ω loops —
+/// and nothing else, with c_v and c_ω within 20 % of the closed forms: their ratio is
+/// K_PT/K_PR = 7.0, where a per-wheel loop (`wheel_friction`) would meet 2/d = 6.1. Seeds
+/// 311–313, first run with `vw_friction` written and not tuned on.
+#[test]
+fn dry_friction_behind_a_v_and_w_loop_is_named_vw_friction() {
+    let p = PhysicalProfile::pioneer3dx();
+    for seed in 311..=313u64 {
+        let frac = 0.04 + 0.06 * ((seed * 2_654_435_761) % 1000) as f64 / 1000.0;
+        let f = frac * p.v_max / c_vw(&p, 1.0).0;
+        let (want_v, want_w) = c_vw(&p, f);
+        let d = diagnosed(&p, seed, |s| s.effects.dry_friction_nm = Some(f));
+        let named: Vec<&str> = d.findings.iter().map(|x| x.effect.as_str()).collect();
+        let got = |name: &str| {
+            d.findings
+                .iter()
+                .find(|x| x.effect == "vw_friction")
+                .and_then(|x| x.parameters.get(name).copied())
+        };
+        println!(
+            "{} seed {seed}: F = {f:.4} N·m, c_v = {:?}, c_w = {:?} (closed forms {want_v:.5}, \
+             {want_w:.5}), named {named:?}",
+            p.name,
+            got("c_v"),
+            got("c_w")
+        );
+        if named != ["vw_friction"] {
+            print!("{}", wheelid::report::diagnosis_text(&d));
+        }
+        assert_eq!(named, ["vw_friction"], "{} seed {seed}", p.name);
+        for (name, want) in [("c_v", want_v), ("c_w", want_w)] {
+            let x = got(name).expect("fitted");
+            assert!(
+                (x / want - 1.0).abs() < 0.2,
+                "{name} = {x}, closed form {want}"
+            );
+        }
+    }
+}
+
 /// Clean rigid-body runs of both built-in profiles under every stamping convention (stated in
 /// the metadata) declare no mismatch — nothing named, nothing unexplained (the first round's
 /// tests may still flag structure that no candidate takes up: Khepera-like window_middle on

@@ -80,7 +80,10 @@ pub const TRUTH: [(&str, &[&str]); 10] = [
         "tyre_radius_right",
         &["tyre_asymmetry", "wheel_asymmetry", "amp_asymmetry"],
     ),
-    ("dry_friction", &["wheel_friction", "coulomb_friction"]),
+    (
+        "dry_friction",
+        &["wheel_friction", "vw_friction", "coulomb_friction"],
+    ),
     ("floor_mu", &["traction_limit", "slip"]),
     ("payload", &["payload_change"]),
 ];

@@ -29,7 +29,7 @@
 //!    every effect of `wheelid_models::effects::EFFECTS` (`input_delay`,
 //!    `acceleration_limit`, `velocity_saturation`, `coulomb_friction`, `wheel_asymmetry`,
 //!    `payload_change`, `gain_drift`, `slip`, `wheel_friction`, `effort_clamp`,
-//!    `amp_asymmetry`, `traction_limit`, `tyre_asymmetry`). A two-channel candidate acts on
+//!    `amp_asymmetry`, `traction_limit`, `tyre_asymmetry`, `vw_friction`). A two-channel candidate acts on
 //!    the channels whose own pattern is significant; the other channel's parameter is held at
 //!    its null;
 //! 5. **model and accept** — the extended model is fitted by output error; the candidate is

@@ -807,7 +807,7 @@ mod tests {
         }
     }
 
-    /// Alternatives: the three wheel imbalances, the two dry frictions and the two floor slips
+    /// Alternatives: the three wheel imbalances, the three dry frictions and the two floor slips
     /// are one quantity each; different physics, and effects of their own quantity (None), are
     /// not, not even with themselves.
     #[test]
@@ -815,7 +815,7 @@ mod tests {
         use Candidate as C;
         let groups = [
             &[C::WHEEL_ASYMMETRY, C::AMP_ASYMMETRY, C::TYRE_ASYMMETRY][..],
-            &[C::COULOMB_FRICTION, C::WHEEL_FRICTION],
+            &[C::COULOMB_FRICTION, C::WHEEL_FRICTION, C::VW_FRICTION],
             &[C::SLIP, C::TRACTION_LIMIT],
         ];
         for (g, group) in groups.iter().enumerate() {

@@ -14,6 +14,7 @@ mod slip;
 mod traction_limit;
 mod tyre_asymmetry;
 mod velocity_saturation;
+mod vw_friction;
 mod wheel_asymmetry;
 mod wheel_friction;
 
@@ -31,11 +32,12 @@ pub use slip::Slip;
 pub use traction_limit::TractionLimit;
 pub use tyre_asymmetry::TyreAsymmetry;
 pub use velocity_saturation::VelocitySaturation;
+pub use vw_friction::VwFriction;
 pub use wheel_asymmetry::WheelAsymmetry;
 pub use wheel_friction::WheelFriction;
 
 /// The registry: every built-in effect, in the order the diagnosis reports them.
-pub static EFFECTS: [&dyn Effect; 13] = [
+pub static EFFECTS: [&dyn Effect; 14] = [
     &InputDelay,
     &AccelerationLimit,
     &VelocitySaturation,
@@ -49,6 +51,7 @@ pub static EFFECTS: [&dyn Effect; 13] = [
     &AmpAsymmetry,
     &TractionLimit,
     &TyreAsymmetry,
+    &VwFriction,
 ];
 
 /// [`Effect::quantity`] of the effects that make one wheel act weaker than the other
@@ -57,7 +60,7 @@ pub static EFFECTS: [&dyn Effect; 13] = [
 /// answers in transients, which encoder data do not tell apart.
 pub const WHEEL_IMBALANCE: &str = "wheel imbalance";
 /// [`Effect::quantity`] of dry friction, as one term on (v, ω) (`coulomb_friction`) or per
-/// wheel (`wheel_friction`).
+/// wheel, met by each wheel's loop (`wheel_friction`) or by v and ω loops (`vw_friction`).
 pub const DRY_FRICTION: &str = "dry friction";
 /// [`Effect::quantity`] of the wheels slipping on the floor, as losses (`slip`) or as a
 /// traction limit (`traction_limit`).
@@ -160,6 +163,8 @@ impl Candidate {
     pub const TRACTION_LIMIT: Candidate = Candidate(&TractionLimit);
     /// Right/left tyre radius mismatch ([`TyreAsymmetry`]).
     pub const TYRE_ASYMMETRY: Candidate = Candidate(&TyreAsymmetry);
+    /// Dry friction per wheel met by v and ω loops ([`VwFriction`]).
+    pub const VW_FRICTION: Candidate = Candidate(&VwFriction);
 
     /// A candidate for any effect (a built-in one of [`EFFECTS`] or the caller's own).
     pub fn new(effect: &'static dyn Effect) -> Self {
