@@ -141,11 +141,11 @@ mod tests {
             let j = VwFriction.force(&p, v, w, d).jacobian;
             let dv = |s: f64| VwFriction.force(&p, v + s, w, d).f;
             let dw = |s: f64| VwFriction.force(&p, v, w + s, d).f;
-            for r in 0..2 {
+            for (r, row) in j.iter().enumerate() {
                 let nv = (dv(h)[r] - dv(-h)[r]) / (2.0 * h);
                 let nw = (dw(h)[r] - dw(-h)[r]) / (2.0 * h);
-                assert!((j[r][0] - nv).abs() <= 1e-5 * nv.abs().max(1.0), "∂f{r}/∂v");
-                assert!((j[r][1] - nw).abs() <= 1e-5 * nw.abs().max(1.0), "∂f{r}/∂ω");
+                assert!((row[0] - nv).abs() <= 1e-5 * nv.abs().max(1.0), "∂f{r}/∂v");
+                assert!((row[1] - nw).abs() <= 1e-5 * nw.abs().max(1.0), "∂f{r}/∂ω");
             }
         }
     }
