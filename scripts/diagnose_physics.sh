@@ -43,7 +43,9 @@
 # window_end) once at 1d4732e (a long recording searched on an excerpt; seed 3's 600 s
 # Khepera singles at window_end were looked at while building it, then 1032 itself: its
 # payload miss led to ac3a40b); 1033 at --duration 600 (single, clean, pairs; window_end)
-# once at ac3a40b (the excerpt then made opt-in); the next report takes 1034.. and 3371.. .
+# once at ac3a40b (the excerpt then made opt-in), then looked at (its Pioneer-like dry
+# friction led to vw_friction); 1034 (single, clean; pairs window_end) and clean 3371-3470
+# once at 2b9b3f6 (the vw_friction candidate); the next report takes 1035.. and 3471.. .
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions

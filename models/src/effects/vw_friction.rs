@@ -4,7 +4,7 @@
 //! but its common part is balanced by the v loop (gain K_PT) and its difference by the ω
 //! loop (gain K_PR), so in command units the ω loop meets c_ω = c_v K_PT/K_PR, which is not
 //! the 2 c_v/d a wheel-PD loop meets (`wheel_friction`). With the rim speeds
-//! v_R = v + dω/2, v_L = v − dω/2 and τ_i = tanh(v_i/ε), ε = 2 mm/s:
+//! v_R = v + dω/2, v_L = v − dω/2 and τ_i = tanh(v_i/ε), ε = 2 mm/s (`wheel_friction`'s):
 //!
 //! ```text
 //! θ1 v̇ = … − c_v (τ_R + τ_L)/2
@@ -31,9 +31,6 @@ static PARAMS: [ParamInfo; 2] = [
         description: "dry friction per wheel as the ω loop meets it, in turning command units",
     },
 ];
-
-/// Smoothing of the sign of each wheel's rim speed [m/s] (as `wheel_friction`'s).
-const EPS: f64 = 0.002;
 
 /// Dry friction per wheel met by v and ω loops, (c_v, c_ω) ≥ 0 (a [`Force`]); null 0;
 /// plausible up to the largest command of each channel; needs the wheel track.
@@ -94,11 +91,7 @@ impl Effect for VwFriction {
     fn force(&self, p: &[f64], v: f64, w: f64, track: f64) -> Force {
         let (cv, cw) = (p[0], p[1]);
         let half = 0.5 * track;
-        let (tr, tl) = (
-            crate::dynamics::tanh((v + half * w) / EPS),
-            crate::dynamics::tanh((v - half * w) / EPS),
-        );
-        let (sr, sl) = ((1.0 - tr * tr) / EPS, (1.0 - tl * tl) / EPS);
+        let [tr, tl, sr, sl] = super::wheel_friction::directions(v, w, track);
         Force {
             f: [-0.5 * cv * (tr + tl), -0.5 * cw * (tr - tl)],
             jacobian: [

@@ -25,6 +25,18 @@ static PARAMS: [ParamInfo; 1] = [ParamInfo {
 /// Smoothing of the sign of each wheel's rim speed [m/s].
 const EPS: f64 = 0.002;
 
+/// Each wheel's smoothed direction of turning at (v [m/s], ω [rad/s]) on a track \[m\],
+/// τ_i = tanh(v_i/ε) with v_R = v + dω/2, v_L = v − dω/2, and its slope dτ_i/dv_i:
+/// (τ_R, τ_L, τ_R', τ_L'). Shared with `vw_friction`.
+pub(super) fn directions(v: f64, w: f64, track: f64) -> [f64; 4] {
+    let half = 0.5 * track;
+    let (tr, tl) = (
+        crate::dynamics::tanh((v + half * w) / EPS),
+        crate::dynamics::tanh((v - half * w) / EPS),
+    );
+    [tr, tl, (1.0 - tr * tr) / EPS, (1.0 - tl * tl) / EPS]
+}
+
 /// Dry friction per wheel c ≥ 0 (a [`Force`]); null 0; plausible up to half the largest
 /// wheel command; needs the wheel track.
 #[derive(Debug, Clone, Copy)]
@@ -79,11 +91,7 @@ impl Effect for WheelFriction {
     fn force(&self, p: &[f64], v: f64, w: f64, track: f64) -> Force {
         let c = p[0];
         let half = 0.5 * track;
-        let (tr, tl) = (
-            crate::dynamics::tanh((v + half * w) / EPS),
-            crate::dynamics::tanh((v - half * w) / EPS),
-        );
-        let (sr, sl) = ((1.0 - tr * tr) / EPS, (1.0 - tl * tl) / EPS);
+        let [tr, tl, sr, sl] = directions(v, w, track);
         Force {
             f: [-0.5 * c * (tr + tl), -c * (tr - tl) / track],
             jacobian: [
