@@ -106,16 +106,13 @@ pub(super) fn fit_candidate(
     // fits run side by side. Not in the screen: a fast lag with a ramp also imitates a dead
     // time, which must still rank first where it is one.
     let active: Vec<usize> = (0..2).filter(|j| !pinned.contains(&(base + j))).collect();
-    let (mut first, alternative) = rayon::join(
-        || run(&theta, &pinned),
-        || {
-            (search == Search::Limit { rate: true }).then(|| {
-                let alt = shortened_lags(data, cur, &model, &theta, base, &active);
-                let r = run(&alt, &pinned);
-                (alt, r)
-            })
-        },
-    );
+    let shortened = || {
+        let alt = shortened_lags(data, cur, &model, &theta, base, &active);
+        let r = run(&alt, &pinned);
+        (alt, r)
+    };
+    let rate = search == Search::Limit { rate: true };
+    let (mut first, alternative) = rayon::join(|| run(&theta, &pinned), || rate.then(shortened));
     if let Some((alt, Ok(r))) = alternative
         && first.as_ref().map_or(true, |f| cost(&r) < cost(f))
     {

@@ -351,17 +351,9 @@ fn first_accepted(
         progress.step(&format!("fitting {}", c.name()), 1);
         // The next candidate that will be fitted whatever this one's verdict is fitted beside
         // it, on the other core (the fits are independent; the order of the verdicts is kept).
+        let least = first_start.min(start_cost);
         let next = (best.is_none() || more < MORE_FITS)
-            .then(|| {
-                let least = first_start.min(start_cost);
-                (pos + 1..fits.len()).find(|&q| {
-                    let (j, cost) = fits.nominee(q);
-                    let cq = round.nominees[j].pattern.candidate;
-                    cost / least <= RIVAL_START_FACTOR
-                        && not_fitted(cq, (cost, now), Some(least), misfit, settings).is_none()
-                        && not_fitted(cq, (cost, now), None, misfit, settings).is_none()
-                })
-            })
+            .then(|| fits.beside(pos, round, least, (now, misfit), settings))
             .flatten();
         match fits.fit(&context, pos, next) {
             Ok(x) => {
@@ -416,6 +408,26 @@ impl Ahead {
     /// The nominee at `pos` and its screened start's training cost.
     fn nominee(&self, pos: usize) -> (usize, f64) {
         (self.starts[pos].0, self.starts[pos].1)
+    }
+
+    /// The first candidate after `pos` that is fitted whether or not the one at `pos` is
+    /// accepted ([`not_fitted`] passes it with and without an accepted start cost `least`; the
+    /// model in hand's training cost and misfit `(now, misfit)`).
+    fn beside(
+        &self,
+        pos: usize,
+        round: &Round,
+        least: f64,
+        (now, misfit): (f64, bool),
+        settings: &DiagnoseSettings,
+    ) -> Option<usize> {
+        (pos + 1..self.len()).find(|&q| {
+            let (j, cost) = self.nominee(q);
+            let c = round.nominees[j].pattern.candidate;
+            cost / least <= RIVAL_START_FACTOR
+                && not_fitted(c, (cost, now), Some(least), misfit, settings).is_none()
+                && not_fitted(c, (cost, now), None, misfit, settings).is_none()
+        })
     }
 
     /// The fit and verdict of the candidate at `pos` ([`fit_and_judge`]), with the one at
