@@ -334,8 +334,9 @@ fn draw_plain(
 /// Magnitude comparisons for every true effect of a run: latency vs `delay_s`; rate limits vs
 /// `v_accel_max`, `w_accel_max` (a channel held at its null, ≥ 10⁵, is skipped); the right
 /// amplifier's gain or tyre factor vs `ratio` (error of the deviation from 1); dry friction vs
-/// `v_coulomb`, `w_coulomb`, `wheel_friction`'s `c_wheel` and `vw_friction`'s `c_v`, `c_w` (the map's θ4, θ6 × the
-/// closed-form steady loss, [`friction_loss_per_nm`]; `coulomb_friction` acts on v and ω, not
+/// `v_coulomb`, `w_coulomb`, `wheel_friction`'s `c_wheel` and `vw_friction`'s `c_v`, `c_w`
+/// (the map's θ4, θ6 × the closed-form steady loss, [`friction_loss_per_nm`];
+/// `coulomb_friction` acts on v and ω, not
 /// per wheel, so its values are a looser match); payload time vs `time_s` and the loaded map's θ1 vs
 /// `theta1_after`; a slippery floor's μ g (1 − b/x_c) (the driven wheels' share of the weight)
 /// vs `accel_max` and μ r/x_c (the centre of mass at the axle's height) vs `load_transfer`.

@@ -66,10 +66,12 @@ pub use report::*;
 /// (`wheel_asymmetry`), and from encoder data alone it cannot be told from a weak amplifier:
 /// the loop holds the wheel's rate whatever its radius, and the larger tyre shows only as that
 /// wheel's share of the chassis inertia growing, i.e. its effort acting weaker in transients
-/// (`amp_asymmetry` is accepted for it; the pose would tell them apart, the encoders do not); dry friction in the wheel joints acts per
-/// wheel, met by each wheel's loop (`wheel_friction`) or by loops on v and ω (`vw_friction`,
-/// the Pioneer-like robot's); a Coulomb term on v and ω (`coulomb_friction`) is accepted too; on a slippery floor the wheels run ahead of the body at
-/// high demand (`traction_limit`; the older setpoint-level `slip` is still accepted).
+/// (`amp_asymmetry` is accepted for it; the pose would tell them apart, the encoders do not);
+/// dry friction in the wheel joints acts per wheel, met by each wheel's loop
+/// (`wheel_friction`) or by loops on v and ω (`vw_friction`, the Pioneer-like robot's); a
+/// Coulomb term on v and ω (`coulomb_friction`) is accepted too; on a slippery floor the
+/// wheels run ahead of the body at high demand (`traction_limit`; the older setpoint-level
+/// `slip` is still accepted).
 pub const TRUTH: [(&str, &[&str]); 10] = [
     ("latency", &["input_delay", "latency"]),
     ("rate_limit", &["acceleration_limit"]),

@@ -411,8 +411,9 @@ impl Ahead {
     }
 
     /// The first candidate after `pos` that is fitted whether or not the one at `pos` is
-    /// accepted ([`not_fitted`] passes it with and without an accepted start cost `least`; the
-    /// model in hand's training cost and misfit `(now, misfit)`).
+    /// accepted: [`not_fitted`] passes it as a rival of an accepted start cost `least` (which
+    /// implies it passes with none accepted); the model in hand's training cost and misfit
+    /// `(now, misfit)`.
     fn beside(
         &self,
         pos: usize,
@@ -424,9 +425,7 @@ impl Ahead {
         (pos + 1..self.len()).find(|&q| {
             let (j, cost) = self.nominee(q);
             let c = round.nominees[j].pattern.candidate;
-            cost / least <= RIVAL_START_FACTOR
-                && not_fitted(c, (cost, now), Some(least), misfit, settings).is_none()
-                && not_fitted(c, (cost, now), None, misfit, settings).is_none()
+            not_fitted(c, (cost, now), Some(least), misfit, settings).is_none()
         })
     }
 
@@ -444,17 +443,18 @@ impl Ahead {
         let mut take = |q: usize| (self.starts[q].0, self.starts[q].2.take());
         let (i, st) = take(pos);
         let st = st.ok_or("fitted twice")?;
-        let ahead = next.map(&mut take).and_then(|(j, st)| st.map(|st| (j, st)));
-        let Some((j, st_next)) = ahead else {
+        let ahead = next.and_then(|q| {
+            let (j, st) = take(q);
+            st.map(|st| (q, j, st))
+        });
+        let Some((q, j, st_next)) = ahead else {
             return fit_and_judge(cx, i, st);
         };
         let (now, then) = rayon::join(
             || fit_and_judge(cx, i, st),
             || fit_and_judge(cx, j, st_next),
         );
-        if let Some(q) = next {
-            self.done[q] = Some(then);
-        }
+        self.done[q] = Some(then);
         now
     }
 }
