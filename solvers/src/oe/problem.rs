@@ -89,17 +89,28 @@ impl<M: DynamicModel + ?Sized> Problem<'_, M> {
     /// `None` if a simulation failed or diverged.
     pub fn evaluated(&self, u: &DVector<f64>) -> Option<Evaluated> {
         let theta = self.theta_of(u);
-        let sims = self
-            .recs
-            .iter()
-            .enumerate()
-            .map(|(r, rec)| {
-                self.model
-                    .simulate(&theta, rec, &self.initial_of(u, r))
-                    .ok()
-            })
-            .collect::<Option<Vec<Simulation>>>()?;
+        let model = self.model;
+        let sims = self.per_recording(u, |rec, x0| model.simulate(&theta, rec, x0).ok())?;
         self.residuals_of(sims)
+    }
+
+    /// `run` on every recording with its initial state at u, the recordings shared out over
+    /// the available cores (a long recording searched on an excerpt is many short ones),
+    /// the results in recording order; `None` if one is.
+    fn per_recording<T: Send>(
+        &self,
+        u: &DVector<f64>,
+        run: impl Fn(&Recording, &[f64]) -> Option<T> + Sync,
+    ) -> Option<Vec<T>> {
+        use rayon::prelude::*;
+        let x0: Vec<Vec<f64>> = (0..self.recs.len())
+            .map(|r| self.initial_of(u, r))
+            .collect();
+        self.recs
+            .par_iter()
+            .zip(&x0)
+            .map(|(rec, x0)| run(rec, x0))
+            .collect()
     }
 
     /// The residuals y − ŷ of the simulations `sims` (one per recording), or `None` if one is
@@ -127,20 +138,16 @@ impl<M: DynamicModel + ?Sized> Problem<'_, M> {
     fn evaluated_with_sensitivities(&self, u: &DVector<f64>) -> Option<Evaluated> {
         let theta = self.theta_of(u);
         self.last_sensitivities.replace(None);
-        let mut sims = Vec::with_capacity(self.recs.len());
-        let mut all = Vec::with_capacity(self.recs.len());
-        for (r, rec) in self.recs.iter().enumerate() {
-            let (sim, sens) = self
-                .model
-                .simulate_with_sensitivities(&theta, rec, &self.initial_of(u, r))
-                .ok()??;
-            let finite = |m: &DMatrix<f64>| m.iter().all(|x| x.is_finite());
-            if !(sens.theta.iter().all(finite) && sens.initial.iter().all(finite)) {
-                return None;
-            }
-            sims.push(sim);
-            all.push(sens);
-        }
+        let model = self.model;
+        let (sims, all): (Vec<Simulation>, Vec<Sensitivities>) = self
+            .per_recording(u, |rec, x0| {
+                let (sim, sens) = model.simulate_with_sensitivities(&theta, rec, x0).ok()??;
+                let finite = |m: &DMatrix<f64>| m.iter().all(|x| x.is_finite());
+                (sens.theta.iter().all(finite) && sens.initial.iter().all(finite))
+                    .then_some((sim, sens))
+            })?
+            .into_iter()
+            .unzip();
         let point = self.residuals_of(sims)?;
         self.last_sensitivities.replace(Some((u.clone(), all)));
         Some(point)
