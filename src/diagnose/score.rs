@@ -35,15 +35,16 @@ use wheelid_core::{DynamicModel, Recording};
 /// Simulated outputs of every recording: per recording (v̂, ω̂).
 pub(crate) type Outputs = Vec<[Vec<f64>; 2]>;
 
-/// Simulates `model` at `theta` over every recording; `None` if a simulation fails or is not
-/// finite.
+/// Simulates `model` at `theta` over every recording (on the available cores, in order);
+/// `None` if a simulation fails or is not finite.
 pub(crate) fn simulate_all(
     model: &dyn DynamicModel,
     theta: &[f64],
     recs: &[Recording],
     initial: &[Vec<f64>],
 ) -> Option<Outputs> {
-    recs.iter()
+    use rayon::prelude::*;
+    recs.par_iter()
         .zip(initial)
         .map(|(r, x0)| {
             let y = model.simulate(theta, r, x0).ok()?;
