@@ -9,6 +9,10 @@
 //!   it is timed and must name exactly its effects (parameters within 20 % when measured for
 //!   the README).
 //!
+//! The settings are the defaults: the search screens and fits the candidates on a 3 600-sample
+//! excerpt of the drive and refits the model found on all of it
+//! (`DiagnoseSettings::search_samples`).
+//!
 //! Run: `cargo bench --bench diagnose` (`-- dead_time` for the case alone).
 
 use criterion::{Criterion, criterion_group, criterion_main};

@@ -200,7 +200,7 @@ pub fn robot_profile(
 /// min_improvement = 0.05
 /// max_effects = 3
 /// track_m = 0.555     # wheel track for wheel_asymmetry
-/// search_samples = 3600  # opt-in: a longer recording is searched on an excerpt, then refitted whole
+/// search_samples = 3600  # the default: a longer recording is searched on an excerpt, then refitted whole
 /// plot = "diagnosis"  # directory for the PNGs
 /// ```
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]

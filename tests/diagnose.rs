@@ -452,7 +452,7 @@ fn warthog_low_fits_are_never_no_mismatch() {
     }
 }
 
-/// The opt-in excerpt (`search_samples = 3600`) on 10 minutes at 50 Hz of the Khepera III
+/// The excerpt (`search_samples = 3600`, the default) on 10 minutes at 50 Hz of the Khepera III
 /// whose drive gain sags by 30 % over the run: searched on 72 s in fifteen windows, the sag is
 /// named `gain_drift` with its rate within 5 % and the report says what was searched. (A
 /// drift counted from each window's own start named it `payload_change`; this checks the

@@ -41,8 +41,9 @@ pub(crate) struct DiagnoseArgs {
     #[arg(long)]
     track: Option<f64>,
     /// Search a recording longer than this many samples on an excerpt of windows spread over
-    /// it, then refit the model found on all of it (default: search every recording whole;
-    /// 3600 is 4× faster on 10 minutes at 50 Hz, at some cost in accuracy — see the README).
+    /// it, then refit the model found on all of it (default 3600; a number at least as long
+    /// as the recording searches it whole: slower, and on 10-minute recordings a little more
+    /// accurate — see the README).
     #[arg(long)]
     search_samples: Option<usize>,
     /// Write PNG plots into this directory.
