@@ -74,7 +74,7 @@
 //! 101/112 right; searched whole, the Pioneer-like runs named the same 52/56 and the first 44
 //! Khepera-like runs two more (41/44 against 39/44: a second effect whose validation drop was
 //! 3–4 % on the excerpt and over the 5 % gate on the whole drive), at 3.4× the diagnosis time
-//! (a slippery floor's pairs take minutes each searched whole). `usize::MAX` searches every
+//! (the Pioneer-like runs at 1.4×; a slippery floor's pairs take minutes each searched whole). `usize::MAX` searches every
 //! recording whole.
 
 mod accept;
@@ -163,8 +163,8 @@ pub struct DiagnoseSettings {
     /// Most samples per recording the search screens and fits candidates on: a longer
     /// recording is searched on an excerpt of this many samples, in windows spread over it,
     /// and the model found is refitted on the whole recording (module docs; ≥ 100 per block).
-    /// Default 3 600 (72 s at 50 Hz): the 10-minute bench 4–30× faster than searched whole
-    /// (README); `usize::MAX` searches every recording whole. On the unseen 10-minute
+    /// Default 3 600 (72 s at 50 Hz): each case of the 10-minute bench 3–7× faster than
+    /// searched whole (README); `usize::MAX` searches every recording whole. On the unseen 10-minute
     /// physics recordings of seed 1035 the whole-drive search named two Khepera-like pairs
     /// right that the excerpt missed (a second effect whose validation drop was 3–4 % on the
     /// excerpt, over 5 % on the whole drive), the Pioneer-like runs alike.
