@@ -1,6 +1,6 @@
 //! Sensitivities by forward differences, for stages without sensitivity equations (the
 //! traction stage, [`super::traction`]): each column of θ and of the initial state is one more
-//! simulation, run on its own thread.
+//! simulation, run on the rayon pool.
 
 use wheelid_core::{DynamicModel, Error, Recording, Result, Sensitivities, Simulation};
 
@@ -10,7 +10,7 @@ impl Extended {
     /// [`Extended::sensitivities_of`] by forward differences of [`DynamicModel::simulate`] in
     /// every column and in the initial state (the traction stage has no sensitivity
     /// equations): steps 1e-5 (|β| + 10⁻³ max|θ1…6|) for θ, 1e-5 (|x0| + 10⁻³) for x0; one
-    /// thread per column.
+    /// task of the rayon pool per column.
     pub(super) fn differenced(
         &self,
         theta: &[f64],
@@ -36,21 +36,18 @@ impl Extended {
             .chain(columns.iter().map(|&j| (Some(j), None)))
             .chain((0..initial.len()).map(|i| (None, Some(i))))
             .collect();
-        let mut sims = std::thread::scope(|scope| {
-            let handles: Vec<_> = jobs
-                .iter()
-                .map(|&(j, i)| scope.spawn(move || moved(j, i)))
-                .collect();
-            handles
-                .into_iter()
-                .map(|h| {
-                    h.join().unwrap_or_else(|_| {
-                        Err(Error::InvalidSetting("a simulation panicked".into()))
-                    })
-                })
-                .collect::<Result<Vec<_>>>()
-        })?
-        .into_iter();
+        // On the pool's threads (no thread of its own per column: an excerpt's windows are
+        // short, and already shared out), collected in order; a simulation that panics (inside
+        // a model) is an error.
+        use rayon::prelude::*;
+        let mut sims = jobs
+            .par_iter()
+            .map(|&(j, i)| {
+                std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| moved(j, i)))
+                    .unwrap_or_else(|_| Err(Error::InvalidSetting("a simulation panicked".into())))
+            })
+            .collect::<Result<Vec<_>>>()?
+            .into_iter();
         let y = sims
             .next()
             .ok_or_else(|| Error::InvalidSetting("no simulation".into()))?;

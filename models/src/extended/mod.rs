@@ -469,7 +469,7 @@ impl Extended {
     /// θ, in that order) and to the initial state: θ1…θ6 and (v0, ω0) by the forward
     /// sensitivity equations integrated alongside the state (below), the candidates'
     /// parameters by forward differences of [`DynamicModel::simulate`] (step 1e-5 (|β| +
-    /// 10⁻³ max|θ1…6|)), run on other threads while the state integrates.
+    /// 10⁻³ max|θ1…6|)), run on the rayon pool while the state integrates.
     ///
     /// With z = (v, ω), p = (θ1…θ6, v0, ω0), f the right-hand side of the module doc and u
     /// the command after the pipeline:
@@ -506,30 +506,31 @@ impl Extended {
         }
         let scale = th0.iter().fold(0.0f64, |a, x| a.max(x.abs()));
         let step = |j: usize| 1e-5 * (theta[j].abs() + 1e-3 * scale);
-        let (z, fd) = std::thread::scope(|scope| {
-            let handles: Vec<_> = columns
-                .iter()
-                .filter(|&&j| j >= 6)
-                .map(|&j| {
-                    scope.spawn(move || {
-                        let mut th = theta.to_vec();
-                        th[j] += step(j);
-                        let (t, p, f) = self.physics(&th)?;
-                        self.integrate::<2, 0>(&t, &p, &f, rec, initial)
+        // The differenced columns on the pool's threads while the state integrates (no thread
+        // of its own per column: an excerpt's windows are short and already shared out); a
+        // simulation that panics (inside a model) is an error.
+        use rayon::prelude::*;
+        let guarded = |run: &dyn Fn() -> Result<[Vec<f64>; 2]>| {
+            std::panic::catch_unwind(std::panic::AssertUnwindSafe(run))
+                .unwrap_or_else(|_| Err(Error::InvalidSetting("a simulation panicked".into())))
+        };
+        let (z, fd): (_, Vec<Result<[Vec<f64>; 2]>>) = rayon::join(
+            || self.integrate::<NZ, NS>(&th0, &ph, &forces, rec, initial),
+            || {
+                columns
+                    .par_iter()
+                    .filter(|&&j| j >= 6)
+                    .map(|&j| {
+                        guarded(&|| {
+                            let mut th = theta.to_vec();
+                            th[j] += step(j);
+                            let (t, p, f) = self.physics(&th)?;
+                            self.integrate::<2, 0>(&t, &p, &f, rec, initial)
+                        })
                     })
-                })
-                .collect();
-            let z = self.integrate::<NZ, NS>(&th0, &ph, &forces, rec, initial);
-            let fd: Vec<Result<[Vec<f64>; 2]>> = handles
-                .into_iter()
-                .map(|h| {
-                    h.join().unwrap_or_else(|_| {
-                        Err(Error::InvalidSetting("a simulation panicked".into()))
-                    })
-                })
-                .collect();
-            (z, fd)
-        });
+                    .collect()
+            },
+        );
         let za = z?;
         // Column j of (θ1…θ6, v0, ω0), channel c.
         let col = |c: usize, j: usize| &za[2 + c * NS + j];

@@ -276,22 +276,17 @@ impl<M: DynamicModel + ?Sized> Problem<'_, M> {
                 None => Some((j, h, up, eval(-h)?)),
             }
         };
-        let workers = std::thread::available_parallelism()
-            .map_or(1, |n| n.get())
-            .clamp(1, p + s);
-        let done: Vec<Option<FdColumn>> = std::thread::scope(|scope| {
-            let handles: Vec<_> = (0..workers)
-                .map(|w| {
-                    let column = &column;
-                    scope.spawn(move || (w..p + s).step_by(workers).map(column).collect::<Vec<_>>())
-                })
-                .collect();
-            // A worker that panicked (inside a model) counts as a failed simulation.
-            handles
-                .into_iter()
-                .flat_map(|h| h.join().unwrap_or_else(|_| vec![None]))
-                .collect()
-        });
+        // On the pool's threads, in column order; a column whose simulation panicked (inside
+        // a model) counts as a failed simulation.
+        use rayon::prelude::*;
+        let done: Vec<Option<FdColumn>> = (0..p + s)
+            .into_par_iter()
+            .map(|j| {
+                std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| column(j)))
+                    .ok()
+                    .flatten()
+            })
+            .collect();
         let mut out = Sensitivities {
             theta: vec![DMatrix::zeros(n, p); s],
             initial: vec![DMatrix::zeros(n, s); s],
