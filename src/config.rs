@@ -218,7 +218,8 @@ pub struct DiagnoseConfig {
     pub alpha: Option<f64>,
     /// Largest correlation lag \[s\].
     pub max_lag_s: Option<f64>,
-    /// Smallest relative drop of the validation cost that counts.
+    /// Smallest relative drop of the validation cost that counts (30 % of it for a candidate
+    /// nominated at p < 10⁻¹²; see `DiagnoseSettings::min_improvement`).
     pub min_improvement: Option<f64>,
     /// Most effects added.
     pub max_effects: Option<usize>,

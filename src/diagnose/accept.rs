@@ -33,6 +33,37 @@ pub(super) fn information(n_eff: f64, drop: f64, k: usize) -> f64 {
     n_eff * (1.0 - drop).max(1e-12).ln() + 2.0 * k as f64
 }
 
+/// The drop of the validation cost a candidate must reach: `min_improvement`, or
+/// [`STRONG_DROP_SHARE`] (30 %) of it where the fingerprint that nominated it is overwhelming
+/// (`p_value` — the round's score test, Bonferroni over a probe grid — below
+/// [`STRONG_FINGERPRINT_P`]). On a recording whose validation cost is mostly the encoders'
+/// quantisation (the Khepera-like robot: a perfect model fits v to ≈ 98.5 %), a real second
+/// effect that binds on a few per cent of the samples takes only 1.5–5 % off the cost: the
+/// fixed gate alone turned it down while its score test stood at χ² ≈ 270 (issue 15: "a 5 %
+/// drop of a cost dominated by encoder quantisation noise is out of reach for a real
+/// effect"). The other checks of [`verdict`] — fit per channel, significance and
+/// plausibility, the fingerprint gone, the rivals' information criterion — stay as they are.
+pub(super) fn required_drop(p_value: f64, min_improvement: f64) -> f64 {
+    if p_value < STRONG_FINGERPRINT_P {
+        STRONG_DROP_SHARE * min_improvement
+    } else {
+        min_improvement
+    }
+}
+
+/// Score-test p-value below which a nominee's fingerprint is overwhelming
+/// ([`required_drop`]). Frozen with [`STRONG_DROP_SHARE`] on the tuning seeds (3, 1017, 1019,
+/// 1023, 1025, 1029; 540 pairs, 396 singles and clean runs): at 30 % of the gate 9 more pairs
+/// are named exactly right (487 → 496; a clamp beside a rate limit, a battery beside a
+/// payload, a larger tyre beside the floor), 50 % gave 7, and no run that was right went
+/// wrong; the singles and clean runs name the same. Near misses with weaker fingerprints
+/// (p ~ 10⁻⁴–10⁻¹⁰: dry friction, a sub-period dead time) keep the whole gate.
+pub(super) const STRONG_FINGERPRINT_P: f64 = 1e-12;
+
+/// Share of `min_improvement` a candidate with an overwhelming fingerprint must take off the
+/// validation cost ([`required_drop`]).
+pub(super) const STRONG_DROP_SHARE: f64 = 0.3;
+
 /// Why a fitted candidate is turned down.
 pub(super) struct Refusal {
     /// For the report.
@@ -89,7 +120,8 @@ pub(super) fn verdict(
     let (before, cost_before) = data.validate_on(&cx.cur.sim, &judged);
     let (after, cost) = data.validate_on(&new.sim, &judged);
     let drop = 1.0 - cost / cost_before;
-    if drop < settings.min_improvement {
+    let gate = required_drop(n.p_value, settings.min_improvement);
+    if drop < gate {
         let change = if drop > 0.0 {
             format!("drops by {:.1} % only", 100.0 * drop)
         } else {
@@ -97,9 +129,19 @@ pub(super) fn verdict(
             let rise = -100.0 * drop;
             format!("rises by {:.1} %", if rise > 0.0 { rise } else { 0.0 })
         };
+        let strong = if gate < settings.min_improvement {
+            format!(
+                "; a fingerprint at p = {:.1e} asks {:.0} % of {:.0} %",
+                n.p_value,
+                100.0 * STRONG_DROP_SHARE,
+                100.0 * settings.min_improvement
+            )
+        } else {
+            String::new()
+        };
         return Err(Refusal::from(format!(
-            "the validation cost {change} (< {:.0} % drop)",
-            100.0 * settings.min_improvement
+            "the validation cost {change} (< {:.1} % drop{strong})",
+            100.0 * gate
         )));
     }
     for (name, b, a) in [
@@ -278,5 +320,23 @@ mod tests {
         assert!(!small_share_left(floor, 9.0, &before, &after));
         assert_eq!(share_left(1.0, &after, &before), f64::INFINITY);
         assert!(!small_share_left(drift, 0.0, &before, &before));
+    }
+
+    /// The default 5 % gate falls to 1.5 % below p = 1e-12 and only there: a candidate
+    /// nominated at p = 1e-21 with a 4.2 % drop (a voltage clamp beside a rate limit on tuning
+    /// seed 1023) or p = 1e-40 with 2.0 % (a battery beside a payload) passes it, one at p =
+    /// 1e-10 (a sub-period dead time) with 4.2 % does not, and p = 1e-12 itself keeps the
+    /// whole gate.
+    #[test]
+    fn an_overwhelming_fingerprint_asks_less_of_the_drop() {
+        let gate = DiagnoseSettings::default().min_improvement;
+        assert_eq!(gate, 0.05);
+        assert!((required_drop(1e-21, gate) - 0.015).abs() < 1e-15);
+        assert!(0.042 >= required_drop(1e-21, gate));
+        assert!(0.020 >= required_drop(1e-40, gate));
+        assert!(0.042 < required_drop(1e-10, gate));
+        assert_eq!(required_drop(1e-12, gate), 0.05);
+        assert_eq!(required_drop(0.5, gate), 0.05);
+        assert_eq!(required_drop(0.0, 0.0), 0.0);
     }
 }
