@@ -140,8 +140,9 @@ pub(super) fn verdict(
             String::new()
         };
         return Err(Refusal::from(format!(
-            "the validation cost {change} (< {:.1} % drop{strong})",
-            100.0 * gate
+            "the validation cost {change} (< {} % drop{strong})",
+            // 5, 1.5: as many decimals as the gate has.
+            (1000.0 * gate).round() / 10.0
         )));
     }
     for (name, b, a) in [
