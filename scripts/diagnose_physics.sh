@@ -50,7 +50,8 @@
 # at 7f8b972, then 1035's excerpt misses were looked at; clean 3471-3570 once at 1587bfc;
 # 1037 (single, clean; pairs window_end) and clean 3571-3670 once at 3b28730 (3b64116's
 # method: the strong-fingerprint gate; 1037's pairs also with f519978's method, to see what
-# the gate changed); the next report takes 1038.. and 3671.. .
+# the gate changed); 1038 at --duration 600 (single, clean, pairs; window_end; excerpt) once
+# at 3b28730's method; the next report takes 1039.. and 3671.. .
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
