@@ -76,8 +76,8 @@
 //! 101/112 right; searched whole, the Pioneer-like runs named the same 52/56 and the first 44
 //! Khepera-like runs two more (41/44 against 39/44: a second effect whose validation drop was
 //! 3–4 % on the excerpt and over the 5 % gate on the whole drive), at 3.4× the diagnosis time
-//! (the Pioneer-like runs at 1.4×; a slippery floor's pairs take minutes each searched whole). `usize::MAX` searches every
-//! recording whole.
+//! (the Pioneer-like runs at 1.4×; a slippery floor's pairs take minutes each searched
+//! whole). `usize::MAX` searches every recording whole.
 
 mod accept;
 mod assemble;

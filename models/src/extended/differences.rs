@@ -4,7 +4,7 @@
 
 use wheelid_core::{DynamicModel, Error, Recording, Result, Sensitivities, Simulation};
 
-use super::Extended;
+use super::{Extended, guarded};
 
 impl Extended {
     /// [`Extended::sensitivities_of`] by forward differences of [`DynamicModel::simulate`] in
@@ -42,10 +42,7 @@ impl Extended {
         use rayon::prelude::*;
         let mut sims = jobs
             .par_iter()
-            .map(|&(j, i)| {
-                std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| moved(j, i)))
-                    .unwrap_or_else(|_| Err(Error::InvalidSetting("a simulation panicked".into())))
-            })
+            .map(|&(j, i)| guarded(|| moved(j, i)))
             .collect::<Result<Vec<_>>>()?
             .into_iter();
         let y = sims

@@ -510,10 +510,6 @@ impl Extended {
         // of its own per column: an excerpt's windows are short and already shared out); a
         // simulation that panics (inside a model) is an error.
         use rayon::prelude::*;
-        let guarded = |run: &dyn Fn() -> Result<[Vec<f64>; 2]>| {
-            std::panic::catch_unwind(std::panic::AssertUnwindSafe(run))
-                .unwrap_or_else(|_| Err(Error::InvalidSetting("a simulation panicked".into())))
-        };
         let (z, fd): (_, Vec<Result<[Vec<f64>; 2]>>) = rayon::join(
             || self.integrate::<NZ, NS>(&th0, &ph, &forces, rec, initial),
             || {
@@ -521,7 +517,7 @@ impl Extended {
                     .par_iter()
                     .filter(|&&j| j >= 6)
                     .map(|&j| {
-                        guarded(&|| {
+                        guarded(|| {
                             let mut th = theta.to_vec();
                             th[j] += step(j);
                             let (t, p, f) = self.physics(&th)?;
@@ -654,6 +650,13 @@ impl Extended {
         }
         Ok(to_samples(&y, grid, &run.index, run.avg))
     }
+}
+
+/// `run`'s result, or an error where it panics (inside a model): a simulation run as a task
+/// of the rayon pool fails alone instead of unwinding through the pool.
+fn guarded<T>(run: impl FnOnce() -> Result<T>) -> Result<T> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(run))
+        .unwrap_or_else(|_| Err(Error::InvalidSetting("a simulation panicked".into())))
 }
 
 /// Integrates `z` over one interval of the grid by `plan`'s sub-steps — RK4, or ETDRK4 on the
