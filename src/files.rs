@@ -56,8 +56,9 @@ pub enum ReadError {
 /// bag (`.mcap`, or a rosbag2 folder: `/cmd_vel` and `/odom`, timed by log time, as
 /// `wheelid simulate --out x.mcap` writes and [`wheelid_robots::replay::read_mcap`] reads);
 /// the format from the extension, else from the content (MCAP magic bytes, else text). A CSV
-/// keeps the columns of `columns` ([`Columns::Required`] for `identify` and `diagnose`, which
-/// use no pose or wheel column); a bag has the required ones only.
+/// keeps the columns of `columns` ([`Columns::Required`] for `identify`, which uses no pose or
+/// wheel column; [`Columns::All`] for `diagnose`, whose `tyre_asymmetry` reads an independent
+/// heading, [`wheelid_core::POSE_SOURCE`]); a bag has the required ones only.
 ///
 /// # Errors
 /// [`ReadError`], naming the file.

@@ -31,6 +31,8 @@ pub use model::{
     ChannelInfo, ChannelRegression, DynamicModel, ParamInfo, RegressorModel, Sensitivities,
     Simulation, extends_eq_2_19,
 };
-pub use recording::{Columns, CommandHold, DRIVE_START, Recording, Timing, VelocitySampling};
+pub use recording::{
+    Columns, CommandHold, DRIVE_START, POSE_SOURCE, Recording, Timing, VelocitySampling,
+};
 pub use robot::{Odometry, Pose, Robot, RobotError};
 pub use solver::{BoundState, LinearFit, LinearProblem, SolveError, SolveStatus, Solver};

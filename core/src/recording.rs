@@ -143,6 +143,14 @@ pub struct Recording {
 /// Metadata key of [`Recording::drive_start`] (seconds, in the recording's time base).
 pub const DRIVE_START: &str = "drive_start_s";
 
+/// Metadata key naming where the pose columns `x`, `y`, `phi` come from. The format calls them
+/// odometry, which may be the wheel encoders' own integral and then tells nothing the encoders
+/// do not; a source independent of the encoders — `ground_truth` (a simulator's chassis),
+/// `mocap`, `icp` (lidar scan matching), `gnss`, `imu` — measures how the chassis really
+/// turned, which a tyre's radius changes and a motor's effort does not
+/// ([`Recording::independent_heading`]). Absent, `odometry` or `wheel_odometry`: not independent.
+pub const POSE_SOURCE: &str = "pose_source";
+
 const REQUIRED: [&str; 5] = ["t", "v_ref", "w_ref", "v", "w"];
 const OPTIONAL: [&str; 5] = ["x", "y", "phi", "wl", "wr"];
 
@@ -263,6 +271,17 @@ impl Recording {
             .filter(|x: &f64| x.is_finite())
             .or_else(|| self.t.first().copied())
             .unwrap_or(f64::NAN)
+    }
+
+    /// The heading column `phi` \[rad\] (one per sample) where metadata [`POSE_SOURCE`] names a
+    /// source independent of the wheel encoders; `None` where there is no heading, or it may
+    /// be the encoders' own integral (no [`POSE_SOURCE`], or `odometry`, `wheel_odometry`).
+    pub fn independent_heading(&self) -> Option<&[f64]> {
+        let source = self.meta(POSE_SOURCE)?.trim();
+        let derived = source.is_empty()
+            || source.eq_ignore_ascii_case("odometry")
+            || source.eq_ignore_ascii_case("wheel_odometry");
+        (!derived).then_some(self.phi.as_deref()).flatten()
     }
 
     /// Sets (or replaces) metadata `key`.

@@ -91,7 +91,9 @@ pub(crate) fn run_diagnose(a: DiagnoseArgs) -> Result<()> {
     } else {
         files
             .iter()
-            .map(|f| wheelid::files::read_recording(f, Columns::Required))
+            // The heading too: where the metadata names a pose independent of the encoders,
+            // it tells a larger tyre from a weak amplifier (`tyre_asymmetry`).
+            .map(|f| wheelid::files::read_recording(f, Columns::All))
             .collect::<Result<Vec<_>, _>>()?
     };
     let bar = Bar::new(!a.json, "{spinner} diagnose [{bar:30}] {pos}/{len} {msg}");

@@ -99,7 +99,7 @@ fn row(raws: &[Raw], k: usize, timing: Timing) -> (f64, (f64, f64), [f64; 2], [f
 /// Simulates `profile` under `excitation` from rest and returns the recording the host writes
 /// under `s.timing` (module docs): columns t, v_ref, w_ref, v, w, x, y, phi, one row per
 /// sample instant but the last. Metadata: `robot`, `source`, `model` (`wheel-pd` or `vw-pd`),
-/// `theta_map` (θ1…θ6 the map of `wheelid_models::physical` gives for the constants; with a
+/// `pose_source: ground_truth` (the pose columns are the chassis's true pose), `theta_map` (θ1…θ6 the map of `wheelid_models::physical` gives for the constants; with a
 /// payload, for the robot as it starts), `effects` (`none` or the settings), `jitter`,
 /// `command_hold: zoh`, `timing` and `velocity_sampling`.
 ///
@@ -138,6 +138,8 @@ pub fn simulate_physics_recording(
         "source",
         format!("wheelid physics backend (rapier3d-f64), seed {}", s.seed),
     );
+    // The pose columns are the chassis's true pose, not the encoders' integral.
+    rec.set_meta(wheelid_core::POSE_SOURCE, "ground_truth");
     rec.set_meta("model", profile.model_name());
     rec.set_meta("theta_map", format!("{:?}", profile.theta()));
     let effects = if s.effects.active().is_empty() {
