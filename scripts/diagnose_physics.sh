@@ -51,7 +51,10 @@
 # 1037 (single, clean; pairs window_end) and clean 3571-3670 once at 3b28730 (3b64116's
 # method: the strong-fingerprint gate; 1037's pairs also with f519978's method, to see what
 # the gate changed); 1038 at --duration 600 (single, clean, pairs; window_end; excerpt) once
-# at 3b28730's method; the next report takes 1039.. and 3671.. .
+# at 3b28730's method; 1037's Pioneer-like amplifier pairs were looked at while building the
+# heading check (8c76ae1); 1039 (single, clean; pairs window_end) and clean 3671-3770 once at
+# 8c76ae1 (a tyre the independent heading does not show is refused); the next report takes
+# 1040.. and 3771.. .
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
