@@ -61,7 +61,7 @@ const CHUNK_S: f64 = 1.0;
 /// The right/left tyre radius ratio the chassis heading shows, (ρ̂, its standard error), from
 /// the recordings whose heading is independent of the encoders
 /// ([`Recording::independent_heading`]); `track` d \[m\]. Each recording is cut into chunks of
-/// about [`CHUNK_S`]; on each, the heading's change (unwrapped) is regressed on the encoders'
+/// about a second; on each, the heading's change (unwrapped) is regressed on the encoders'
 /// rim distances over d, Δφ = a Σ m_R Δt/d − b Σ m_L Δt/d with m_R,L = v ± (d/2) ω (least
 /// squares, no intercept), ρ̂ = a/b and its standard error by the delta method (module docs).
 /// `None` without such a heading, with fewer than three chunks, or where the rim distances
