@@ -652,6 +652,22 @@ fn diagnosis_model_and_show(s: &mut String, d: &Diagnosis) {
             .collect();
         let _ = writeln!(s, "   refitted: {}", params.join(", "));
     }
+    if let Some(h) = &d.heading {
+        let _ = writeln!(
+            s,
+            "   heading (a pose independent of the encoders): the chassis turns as a right/left \
+             tyre radius ratio of {} — the right wheel covers {:+.1} % more ground than its \
+             encoder says; {}",
+            estimate(h.ratio, h.std_err, "±"),
+            100.0 * (h.ratio - 1.0),
+            if h.modelled {
+                "tyre_asymmetry holds it"
+            } else {
+                "the model holds no tyre_asymmetry (the dynamics do not show it apart from the \
+                 wheels' efforts): calibrate the odometry's wheel radii"
+            }
+        );
+    }
     let _ = writeln!(s, "   ({:.2} s)", d.seconds);
 }
 

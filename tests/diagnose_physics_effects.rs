@@ -236,7 +236,9 @@ fn actuator_effects_are_named_where_they_act() {
 /// asymmetry a = 1/ρ plus that wheel's row of the dynamics (the chassis inertia seen through
 /// the larger tyre). Seed 1001 (the tyre candidate was built looking at tuning seed 3 of
 /// `scripts/diagnose_physics.sh`; seed 1001 was not looked at with it). The weak amplifier of
-/// `actuator_effects_are_named_where_they_act`, same seed, stays `amp_asymmetry`.
+/// `actuator_effects_are_named_where_they_act`, same seed, stays `amp_asymmetry`. The
+/// backend's heading is the chassis's true one: it shows the ratio within 10⁻³, and the report
+/// says so.
 #[test]
 fn a_larger_tyre_is_named_tyre_asymmetry() {
     let p = PhysicalProfile::khepera3();
@@ -244,6 +246,9 @@ fn a_larger_tyre_is_named_tyre_asymmetry() {
     let rho = named_param(&d, "tyre_asymmetry", "right_radius").expect("radius");
     println!("tyre: right_radius {rho:.4} vs 1.04");
     assert!(((rho - 1.0) / 0.04 - 1.0).abs() < 0.2, "right_radius {rho}");
+    let h = d.heading.as_ref().expect("the heading shows the tyre");
+    assert!((h.ratio - 1.04).abs() < 1e-3 && h.modelled, "{h:?}");
+    assert!(wheelid::report::diagnosis_text(&d).contains("+4.0 % more ground"));
 }
 
 /// A payload set down inside a validation block (19 s of a 60 s drive cut in five 12 s blocks:
@@ -321,6 +326,7 @@ fn a_weak_amplifier_is_not_named_a_larger_tyre_the_heading_does_not_show() {
         .and_then(|f| f.parameters.get("right_gain").copied())
         .expect("right_gain");
     assert!((gain / 0.927_889 - 1.0).abs() < 0.02, "right_gain {gain}");
+    assert!(d.heading.is_none(), "equal tyres: {:?}", d.heading);
     rec.set_meta(wheelid::core::POSE_SOURCE, "odometry");
     let (_, named) = run(&rec);
     assert_eq!(named, ["gain_drift", "tyre_asymmetry"]);

@@ -170,6 +170,17 @@ pub(super) fn assemble(
             extended: out.cur.sim[r].clone(),
         })
         .collect();
+    let heading = (data.track)
+        .and_then(|d| wheelid_models::effects::heading_ratio(&data.recs, d))
+        .filter(|(rho, se)| {
+            let off = (rho - 1.0).abs();
+            off >= wheelid_models::effects::MIN_RATIO_EFFECT && off >= 3.0 * se
+        })
+        .map(|(ratio, std_err)| HeadingCheck {
+            ratio,
+            std_err,
+            modelled: out.cur.candidates.contains(&Candidate::TYRE_ASYMMETRY),
+        });
     let seconds_of = |m: &[Vec<bool>]| m.iter().flatten().filter(|&&b| b).count() as f64 * data.dt;
     Diagnosis {
         nominal,
@@ -189,6 +200,7 @@ pub(super) fn assemble(
         findings: out.findings,
         rejected: out.rejected,
         unexplained,
+        heading,
         final_stage,
         final_location,
         seconds,

@@ -343,6 +343,10 @@ pub struct Diagnosis {
     pub rejected: Vec<Rejected>,
     /// Structure no candidate explains.
     pub unexplained: Option<Unexplained>,
+    /// What a heading independent of the encoders shows of the tyres, where it shows them
+    /// unequal ([`HeadingCheck`]); `None` without such a heading, or where it turns as equal
+    /// tyres do.
+    pub heading: Option<HeadingCheck>,
     /// The final model.
     #[serde(rename = "final")]
     pub final_stage: Stage,
@@ -353,6 +357,22 @@ pub struct Diagnosis {
     /// Series for the plots.
     #[serde(skip)]
     pub series: Vec<DiagnosisSeries>,
+}
+
+/// The right/left tyre radius ratio a heading independent of the encoders shows
+/// (`wheelid_models::effects::heading_ratio`: the heading's change regressed on the encoders'
+/// rim distances, as UMBmark measures a wheel-diameter ratio), reported where it departs from 1
+/// by at least `wheelid_models::effects::MIN_RATIO_EFFECT` (1 %) and three standard errors. A
+/// larger tyre makes the encoders' odometry misread that wheel's travel whatever the dynamics
+/// show: beside a weak amplifier of the opposite sign it can leave no dynamic trace at all.
+#[derive(Debug, Clone, Serialize)]
+pub struct HeadingCheck {
+    /// Right/left tyre radius ratio ρ \[-\].
+    pub ratio: f64,
+    /// Its standard error (delta method).
+    pub std_err: f64,
+    /// Whether the final model holds `tyre_asymmetry`.
+    pub modelled: bool,
 }
 
 /// How the samples were split.
