@@ -99,9 +99,10 @@ fn row(raws: &[Raw], k: usize, timing: Timing) -> (f64, (f64, f64), [f64; 2], [f
 /// Simulates `profile` under `excitation` from rest and returns the recording the host writes
 /// under `s.timing` (module docs): columns t, v_ref, w_ref, v, w, x, y, phi, one row per
 /// sample instant but the last. Metadata: `robot`, `source`, `model` (`wheel-pd` or `vw-pd`),
-/// `pose_source: ground_truth` (the pose columns are the chassis's true pose), `theta_map` (θ1…θ6 the map of `wheelid_models::physical` gives for the constants; with a
-/// payload, for the robot as it starts), `effects` (`none` or the settings), `jitter`,
-/// `command_hold: zoh`, `timing` and `velocity_sampling`.
+/// `pose_source: ground_truth` (the pose columns are the chassis's true pose), `theta_map`
+/// (θ1…θ6 the map of `wheelid_models::physical` gives for the constants; with a payload, for
+/// the robot as it starts), `effects` (`none` or the settings), `jitter`, `command_hold: zoh`,
+/// `timing` and `velocity_sampling`.
 ///
 /// # Errors
 /// [`wheelid_core::Error::InvalidSetting`] for a bad profile or setting (duration ≤ 0, jitter
