@@ -331,3 +331,67 @@ fn a_weak_amplifier_is_not_named_a_larger_tyre_the_heading_does_not_show() {
     let (_, named) = run(&rec);
     assert_eq!(named, ["gain_drift", "tyre_asymmetry"]);
 }
+
+/// A weak right amplifier (gain 0.930) beside a larger right tyre (1.0414) on the
+/// Pioneer-like robot, the magnitudes of tuning seed 1029's pair: from the encoders they are
+/// one right wheel acting weaker, and alone they are named one imbalance. The backend's
+/// heading (`pose_source: ground_truth`) measures the tyre: it is named first, with the
+/// heading as its evidence and its dynamic ratio between 1 + (ρ − 1)/1.5 and 1 + 1.5 (ρ − 1),
+/// and the amplifier is searched beside it and named weak. With the heading marked as
+/// odometry, one imbalance is named.
+#[test]
+fn a_larger_tyre_the_heading_measures_is_named_beside_a_weak_amplifier() {
+    let p = PhysicalProfile::pioneer3dx();
+    let (amp, rho) = (0.930_313_033_110_953_7, 1.041_426_744_526_988_7);
+    let mut s = PhysicsSettings {
+        seed: 1029,
+        ..PhysicsSettings::default()
+    };
+    s.effects.amp_gain_right = Some(amp);
+    s.effects.tyre_radius_right = Some(rho);
+    let e = p.random_multisine(1029).expect("excitation");
+    let mut rec = simulate_physics_recording(&p, &e, &s).expect("runs");
+    let model = wheelid::models::by_name(p.model_name()).expect("model");
+    let run = |rec: &wheelid::core::Recording| {
+        let d = diagnose(
+            std::slice::from_ref(rec),
+            model.as_ref(),
+            &DiagnoseSettings::default(),
+        )
+        .expect("diagnoses");
+        let mut named: Vec<String> = d.findings.iter().map(|f| f.effect.clone()).collect();
+        named.sort();
+        (d, named)
+    };
+    let (d, named) = run(&rec);
+    let text = wheelid::report::diagnosis_text(&d);
+    assert_eq!(named, ["amp_asymmetry", "tyre_asymmetry"], "{text}");
+    let param = |effect: &str, name: &str| {
+        (d.findings.iter())
+            .find(|f| f.effect == effect)
+            .and_then(|f| f.parameters.get(name).copied())
+            .expect("a parameter")
+    };
+    let tyre = d.findings.iter().find(|f| f.effect == "tyre_asymmetry");
+    assert!(
+        tyre.is_some_and(|f| f.evidence.contains("measured")),
+        "{text}"
+    );
+    let radius = param("tyre_asymmetry", "right_radius");
+    assert!(
+        radius >= 1.0 + (rho - 1.0) / 1.5 - 1e-9 && radius <= 1.0 + (rho - 1.0) * 1.5 + 1e-3,
+        "right_radius {radius}"
+    );
+    let heading = d.heading.as_ref().expect("the heading shows the tyre");
+    assert!((heading.ratio - rho).abs() < 1e-3, "{heading:?}");
+    let gain = param("amp_asymmetry", "right_gain");
+    assert!(gain < 0.97, "right_gain {gain}");
+    rec.set_meta(wheelid::core::POSE_SOURCE, "odometry");
+    let (_, named) = run(&rec);
+    let imbalances = ["amp_asymmetry", "tyre_asymmetry", "wheel_asymmetry"];
+    let n = named
+        .iter()
+        .filter(|e| imbalances.contains(&e.as_str()))
+        .count();
+    assert_eq!(n, 1, "{named:?}");
+}

@@ -249,6 +249,23 @@ impl ProbeData<'_> {
     }
 }
 
+/// What a sensor other than the encoders measures of an effect ([`Effect::measured`]): its
+/// parameters' values (one per [`Effect::params`] entry, in its units) with their standard
+/// errors, the bounds within which the encoders' dynamics may show them (an inertia the
+/// tyre does not carry makes a tyre look smaller to the dynamics than to the heading), and
+/// what measured them, for the report.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Measurement {
+    /// The measured values, one per parameter.
+    pub values: Vec<f64>,
+    /// Their standard errors.
+    pub std_err: Vec<f64>,
+    /// (lower, upper) bounds of each parameter in a fit of the dynamics.
+    pub bounds: Vec<(f64, f64)>,
+    /// What measured them ("the chassis heading …").
+    pub evidence: String,
+}
+
 /// What a fitted effect is checked against.
 #[derive(Debug, Clone, Copy)]
 pub struct FitData<'a> {
@@ -402,6 +419,16 @@ pub trait Effect: Send + Sync + std::fmt::Debug {
     /// smaller iteration budget.
     fn differenced(&self) -> bool {
         false
+    }
+    /// What a sensor other than the encoders measures of it on `recordings` (wheel track
+    /// `track` \[m\] if known), where it does: an independent heading measures a larger
+    /// tyre's ratio by kinematics ([`Recording::independent_heading`]). The diagnosis then
+    /// names it whatever the dynamics show — in the final model in place of the effects of
+    /// its [`Effect::quantity`], its parameters within [`Measurement::bounds`] — and searches
+    /// those effects beside it (a weak amplifier beside the tyre). Default: `None`, the
+    /// encoders alone see it.
+    fn measured(&self, _recordings: &[Recording], _track: Option<f64>) -> Option<Measurement> {
+        None
     }
     /// The quantity the encoders see it move, where other effects move the same one (`None`:
     /// its own). Effects of one quantity are alternatives the encoders cannot tell apart (a

@@ -23,7 +23,8 @@ pub mod solver;
 
 pub use condition::{ConditionSettings, Conditioned, CutoffChoice};
 pub use effect::{
-    Effect, EffectChannels, Force, Probe, Search, TRACTION_SLIP_SHARE, Terms, Traction, WheelTerms,
+    Effect, EffectChannels, Force, Measurement, Probe, Search, TRACTION_SLIP_SHARE, Terms,
+    Traction, WheelTerms,
 };
 pub use error::{Error, Location, Result};
 pub use estimator::{Estimate, Estimator, EstimatorInput, FreeRun, TimingReport, TimingSource};

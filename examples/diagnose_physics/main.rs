@@ -67,7 +67,8 @@ pub use report::*;
 /// the loop holds the wheel's rate whatever its radius, and the larger tyre shows only as that
 /// wheel's share of the chassis inertia growing, i.e. its effort acting weaker in transients
 /// (`amp_asymmetry` is accepted for it; the backend's true heading, `pose_source:
-/// ground_truth`, shows the tyre, and the diagnosis refuses a tyre it does not show);
+/// ground_truth`, measures the tyre, which the diagnosis then names from it, and a tyre it
+/// does not show is refused);
 /// dry friction in the wheel joints acts per wheel, met by each wheel's loop
 /// (`wheel_friction`) or by loops on v and ω (`vw_friction`, the Pioneer-like robot's); a
 /// Coulomb term on v and ω (`coulomb_friction`) is accepted too; on a slippery floor the
@@ -93,12 +94,12 @@ pub const TRUTH: [(&str, &[&str]); 10] = [
 ];
 
 /// Pairs of physics effects that move one quantity the encoders see, so that one candidate
-/// stands for both and [`exactly_right`] (which asks for two) fails them: a sagging and a
+/// may stand for both and [`exactly_right`] (which asks for two) fails them: a sagging and a
 /// decaying battery are one drive gain falling over the run (`gain_drift`); a weak right
 /// amplifier and a larger right tyre are one right wheel acting weaker in transients to the
-/// encoders (`amp_asymmetry`; [`TRUTH`]; the diagnosis uses the backend's true heading only
-/// to refuse a tyre it does not show). Reported as a group of its own beside every run, not
-/// taken out of the score.
+/// encoders (`amp_asymmetry`; [`TRUTH`]) — the backend's true heading measures the tyre, and
+/// the diagnosis names it from there and searches the amplifier beside it. Reported as a
+/// group of its own beside every run, not taken out of the score.
 pub const ONE_QUANTITY: [(&str, &str); 2] = [
     ("gain_sag", "gain_decay"),
     ("amp_gain_right", "tyre_radius_right"),

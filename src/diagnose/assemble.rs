@@ -37,8 +37,11 @@ fn final_parameters(findings: &mut [Finding], cur: &Current) {
                 if let Some(v) = f.parameters.get_mut(info.name) {
                     *v = cur.theta[at + j];
                 }
+                // A change time's error is its placing's; a measured parameter held in the
+                // later fits keeps its first fit's.
                 if let Some(v) = f.std_err.get_mut(info.name)
                     && !(c.effect().search() == Search::ChangeTime && j == 0)
+                    && !cur.pinned.contains(&(at + j))
                 {
                     *v = cur.std_err[at + j];
                 }

@@ -45,6 +45,7 @@ impl Data {
             weight: self.weight,
             accel: Vec::new(),
             noise_floor: self.noise_floor,
+            measured: self.measured.clone(),
         };
         let mut origin = Vec::new();
         for (i, rec) in self.recs.iter().enumerate() {
@@ -239,6 +240,7 @@ mod tests {
             weight: [1.0; 2],
             accel: vec![[vec![0.0; n], vec![0.0; n]]],
             noise_floor: [1e-3; 2],
+            measured: Vec::new(),
             recs: vec![rec],
         }
     }

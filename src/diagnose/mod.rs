@@ -59,7 +59,13 @@
 //!    model (forward selection, at most [`DiagnoseSettings::max_effects`], until every channel
 //!    is fitted to [`SEARCH_FIT_PERCENT`]; effects that move one quantity the encoders see,
 //!    [`wheelid_core::Effect::quantity`], are alternatives: once one is in, the others are
-//!    not searched). What stays significant or above the noise floor in a channel
+//!    not searched). An effect that a sensor other than the encoders measures
+//!    ([`wheelid_core::Effect::measured`]: a larger tyre in a heading independent of the
+//!    encoders) is then in the model whatever the dynamics show — in place of the candidates
+//!    of its quantity, fitted within the bounds its measurement allows, held, and named with
+//!    the measurement as its evidence — and the search goes on for the effects the encoders
+//!    cannot tell from it alone (a weak amplifier beside the tyre; `measured`). What stays
+//!    significant or above the noise floor in a channel
 //!    fitted below [`PRACTICAL_FIT_PERCENT`] once the noise floor is taken out of its residual
 //!    ([`ChannelFit::noise_corrected_fit_percent`]: the sensor's own noise is no unexplained
 //!    physics), and any channel below [`LOW_FIT_PERCENT`], is reported as [`Unexplained`],
@@ -85,6 +91,7 @@ mod excerpt;
 mod fingerprint;
 mod fit;
 mod locate;
+mod measured;
 mod place;
 mod prepare;
 mod score;

@@ -24,6 +24,9 @@ pub(super) struct Data {
     pub(super) accel: Outputs,
     /// The measurement noise floor σ_n per channel [channel unit] ([`noise_floor`]).
     pub(super) noise_floor: [f64; 2],
+    /// The candidates another sensor measures on the whole drive, with what it measures
+    /// ([`wheelid_core::Effect::measured`]; an excerpt keeps the drive's).
+    pub(super) measured: Vec<(Candidate, wheelid_core::Measurement)>,
 }
 
 impl Data {
@@ -464,6 +467,11 @@ pub(super) fn prepare(
         .or_else(|| recs.iter().find_map(track_from_meta));
     let (accel, noise_floor) = accelerations(&recs, settings);
     let weight = [0, 1].map(|c| 1.0 / fit.noise_std[c].max(1e-12));
+    let measured = settings
+        .candidates
+        .iter()
+        .filter_map(|&c| c.effect().measured(&recs, track).map(|m| (c, m)))
+        .collect();
     let data = Data {
         recs,
         placing: train.clone(),
@@ -475,6 +483,7 @@ pub(super) fn prepare(
         weight,
         accel,
         noise_floor,
+        measured,
     };
     Ok((data, fit))
 }
