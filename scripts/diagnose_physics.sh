@@ -53,8 +53,11 @@
 # the gate changed); 1038 at --duration 600 (single, clean, pairs; window_end; excerpt) once
 # at 3b28730's method; 1037's Pioneer-like amplifier pairs were looked at while building the
 # heading check (8c76ae1); 1039 (single, clean; pairs window_end) and clean 3671-3770 once at
-# 8c76ae1 (a tyre the independent heading does not show is refused); the next report takes
-# 1040.. and 3771.. .
+# 8c76ae1 (a tyre the independent heading does not show is refused); 1040 (single, clean;
+# pairs window_end) and clean 3771-3870 once at 484ef82 (a tyre the heading measures is named
+# and an amplifier searched beside it; 1040's pairs also with 8c76ae1's method, to see what it
+# changed), then 1040's strong amplifier beside a larger tyre was looked at; the next report
+# takes 1041.. and 3871.. .
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions

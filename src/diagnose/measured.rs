@@ -22,8 +22,8 @@
 //! (2) or dry friction (1) on the Pioneer-like robot — the tyre meets the clamp and the
 //! floor's limit sooner, which its model does not know.
 
-use super::*;
 use super::search::Outcome;
+use super::*;
 
 /// The search's final model `cur` settled on what another sensor measures ([`Data::measured`]):
 /// each measured candidate the search did not name, or named outside its measurement's
