@@ -183,6 +183,22 @@ fn clean_runs_under_every_convention_declare_nothing() {
     }
 }
 
+/// The diagnosis of one recording with the default settings and the names it gives, sorted.
+fn diagnosed_named(
+    rec: &wheelid::core::Recording,
+    model: &dyn wheelid::core::RegressorModel,
+) -> (Diagnosis, Vec<String>) {
+    let d = diagnose(
+        std::slice::from_ref(rec),
+        model,
+        &DiagnoseSettings::default(),
+    )
+    .expect("diagnoses");
+    let mut named: Vec<String> = d.findings.iter().map(|f| f.effect.clone()).collect();
+    named.sort();
+    (d, named)
+}
+
 /// The named effects of `d` and the parameter `param` of `effect`, printing the report when
 /// `want` is not exactly what was named.
 fn named_param(d: &Diagnosis, want: &str, param: &str) -> Option<f64> {
@@ -297,17 +313,7 @@ fn a_weak_amplifier_is_not_named_a_larger_tyre_the_heading_does_not_show() {
     let mut rec = simulate_physics_recording(&p, &e, &s).expect("runs");
     assert_eq!(rec.meta(wheelid::core::POSE_SOURCE), Some("ground_truth"));
     let model = wheelid::models::by_name(p.model_name()).expect("model");
-    let run = |rec: &wheelid::core::Recording| {
-        let d = diagnose(
-            std::slice::from_ref(rec),
-            model.as_ref(),
-            &DiagnoseSettings::default(),
-        )
-        .expect("diagnoses");
-        let mut named: Vec<String> = d.findings.iter().map(|f| f.effect.clone()).collect();
-        named.sort();
-        (d, named)
-    };
+    let run = |rec: &wheelid::core::Recording| diagnosed_named(rec, model.as_ref());
     let (d, named) = run(&rec);
     assert_eq!(
         named,
@@ -352,17 +358,7 @@ fn a_larger_tyre_the_heading_measures_is_named_beside_a_weak_amplifier() {
     let e = p.random_multisine(1029).expect("excitation");
     let mut rec = simulate_physics_recording(&p, &e, &s).expect("runs");
     let model = wheelid::models::by_name(p.model_name()).expect("model");
-    let run = |rec: &wheelid::core::Recording| {
-        let d = diagnose(
-            std::slice::from_ref(rec),
-            model.as_ref(),
-            &DiagnoseSettings::default(),
-        )
-        .expect("diagnoses");
-        let mut named: Vec<String> = d.findings.iter().map(|f| f.effect.clone()).collect();
-        named.sort();
-        (d, named)
-    };
+    let run = |rec: &wheelid::core::Recording| diagnosed_named(rec, model.as_ref());
     let (d, named) = run(&rec);
     let text = wheelid::report::diagnosis_text(&d);
     assert_eq!(named, ["amp_asymmetry", "tyre_asymmetry"], "{text}");

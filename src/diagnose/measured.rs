@@ -116,6 +116,17 @@ fn replace_alternatives(
     Ok((new, finding, replaced))
 }
 
+/// Whether candidate `c` moves the quantity of a measured candidate in the model `cur`
+/// ([`Data::measured`]): it is searched beside it, as what the measurement does not explain.
+pub(super) fn beside_measured(data: &Data, cur: &Current, c: Candidate) -> bool {
+    let q = c.effect().quantity();
+    q.is_some()
+        && cur
+            .candidates
+            .iter()
+            .any(|&k| data.measurement(k).is_some() && k.effect().quantity() == q)
+}
+
 /// `cur` with measured candidate `c` (its measurement `m`) added and refitted on the training
 /// blocks from the measured values, held within the measurement's bounds; its finding.
 fn fit_measured(

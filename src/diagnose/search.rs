@@ -115,7 +115,7 @@ fn test_round(
     // measured larger tyre stood at p = 0.48 on the Pioneer-like robot (tuning seed 1025, the
     // amplifier at 0.90), and the search left ω at 93.8 %.
     for (i, n) in nominees.iter().enumerate() {
-        nominated[i] |= beside_measured(data, cur, n.pattern.candidate);
+        nominated[i] |= measured::beside_measured(data, cur, n.pattern.candidate);
     }
     Some(Round {
         nominated,
@@ -688,17 +688,6 @@ fn backward_step(
     cur
 }
 
-/// Whether candidate `c` moves the quantity of a measured candidate in the model `cur`
-/// ([`Data::measured`]): it is searched beside it, as what the measurement does not explain.
-fn beside_measured(data: &Data, cur: &Current, c: Candidate) -> bool {
-    let q = c.effect().quantity();
-    q.is_some()
-        && cur
-            .candidates
-            .iter()
-            .any(|&k| data.measurement(k).is_some() && k.effect().quantity() == q)
-}
-
 /// Whether `a` and `b` move one quantity ([`wheelid_core::Effect::quantity`]): alternatives,
 /// of which a model holds at most one.
 fn same_quantity(a: Candidate, b: Candidate) -> bool {
@@ -725,8 +714,8 @@ pub(super) fn run(
         searched_s: data.recs.iter().map(Recording::len).sum::<usize>() as f64 * data.dt,
     };
     let cur = rounds(data, cur, settings, Some(location), progress, &mut out);
-    let (cur, measured) = measured::settle(data, cur, &mut out);
-    let cur = if measured {
+    let (cur, settled) = measured::settle(data, cur, &mut out);
+    let cur = if settled {
         // A measured effect is a mismatch of the nominal model whatever the dynamics show.
         out.mismatch = true;
         rounds(data, cur, settings, None, progress, &mut out)
@@ -740,7 +729,7 @@ pub(super) fn run(
 /// Forward selection from `cur` (module docs, steps 2–7), recording into `out`: the first
 /// rounds, from the nominal model located at `location`, search every candidate while the
 /// tests establish a mismatch; later ones (`location` `None`, after a measured effect is in,
-/// [`measured::settle`]) search only what [`beside_measured`] names, while the model misses a
+/// [`measured::settle`]) search only what [`measured::beside_measured`] names, while the model misses a
 /// relevant share.
 fn rounds(
     data: &Data,
@@ -766,7 +755,7 @@ fn rounds(
                     same_quantity(*k, *c) && (location.is_some() || data.measurement(*k).is_none())
                 })
             })
-            .filter(|c| location.is_some() || beside_measured(data, &cur, *c))
+            .filter(|c| location.is_some() || measured::beside_measured(data, &cur, *c))
             .collect();
         if location.is_none() && pending.is_empty() {
             break;
