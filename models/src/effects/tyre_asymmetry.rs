@@ -62,12 +62,12 @@ static PARAMS: [ParamInfo; 1] = [ParamInfo {
 pub const HEADING_SHARE: f64 = 0.5;
 
 /// Standard errors by which the heading's ratio must depart from 1 (and by at least
-/// [`super::MIN_RATIO_EFFECT`]) for the tyre to be measured, named and held in the model from
-/// the start ([`TyreAsymmetry::measured`]). On the physics backend's tuning recordings (1 092
-/// runs with a true heading, seeds 3, 1017–1029 and 1037, 8c76ae1's caches) the runs without
-/// a larger tyre reach at most 2.67 (beside a slippery floor, whose slip biases the encoders'
-/// distances), those with one at least 3.2, and 159 of 168 reach 4 (the others beside a
-/// floor, where the search alone still decides).
+/// [`super::MIN_RATIO_EFFECT`]) for the tyre to be measured, named whatever the dynamics show
+/// ([`TyreAsymmetry::measured`]). On the physics backend's tuning recordings (1 092 runs with
+/// a true heading, seeds 3, 1017–1029 and 1037, 8c76ae1's caches) the runs without a larger
+/// tyre reach at most 2.67 (beside a slippery floor, whose slip biases the encoders'
+/// distances); of the 168 with one, 159 reach 4 — the other nine are all beside a floor, three
+/// of them at 2.1–2.3, and there the search alone decides.
 pub const MEASURED_Z: f64 = 4.0;
 
 /// Seconds of driving per chunk of [`heading_ratio`]'s regression.
@@ -165,8 +165,8 @@ impl Effect for TyreAsymmetry {
     /// tyre only roughly as the heading does: smaller where the motor's, gearbox's and wheel's
     /// own inertia and the loop's derivative term, which do not roll on the tyre, take their
     /// share, larger where the wheel meets a voltage clamp sooner for it. On the backend's
-    /// tuning pairs the fitted departure is 0.8–0.97 of the true one, 1.0–1.15 beside a
-    /// clamp. The fit is held within [`HEADING_SHARE`] of the heading's departure either way
+    /// tuning pairs the fitted departure is 0.8–0.97 of the true one (0.64 once, beside a
+    /// slippery floor), 0.96–1.15 beside a clamp. The fit is held within [`HEADING_SHARE`] of the heading's departure either way
     /// (the near end the least [`TyreAsymmetry::plausible`] takes), 1 + (ρ̂ − 1)/(1 + s) to
     /// 1 + (ρ̂ − 1)(1 + s), widened by three standard errors on the far side.
     fn measured(&self, recordings: &[Recording], track: Option<f64>) -> Option<Measurement> {
