@@ -106,9 +106,8 @@ fn replace_alternatives(
     let q = c.effect().quantity();
     let mut without = cur.clone();
     let mut replaced = Vec::new();
-    while let Some(k) =
-        (without.candidates.iter()).position(|k| q.is_some() && k.effect().quantity() == q)
-    {
+    let alternative = |k: &Candidate| *k == c || (q.is_some() && k.effect().quantity() == q);
+    while let Some(k) = without.candidates.iter().position(alternative) {
         replaced.push(without.candidates[k]);
         without = remove_candidate(data, &without, k)?;
     }
