@@ -68,12 +68,8 @@ pub(super) fn settle(data: &Data, mut cur: Current, out: &mut Outcome) -> (Curre
         }
         // Held from here on: what the encoders cannot tell from it (a weak amplifier) is
         // then fitted beside it, not traded against it along their common valley.
-        let mut at = 6;
-        for k in &cur.candidates {
-            if k == c {
-                cur.pinned.extend(at..at + k.params().len());
-            }
-            at += k.params().len();
+        if let Some(at) = params_of(&cur, *c) {
+            cur.pinned.extend(at);
         }
         any = true;
     }
@@ -83,15 +79,23 @@ pub(super) fn settle(data: &Data, mut cur: Current, out: &mut Outcome) -> (Curre
 /// Whether measured candidate `c` (its measurement `m`) is in the model `cur` with its
 /// parameters within the measurement's bounds.
 fn within(cur: &Current, c: Candidate, m: &wheelid_core::Measurement) -> bool {
+    params_of(cur, c).is_some_and(|at| {
+        (cur.theta[at].iter().zip(&m.bounds)).all(|(x, (lo, hi))| (*lo..=*hi).contains(x))
+    })
+}
+
+/// Where candidate `c`'s parameters sit in the θ of the model `cur` (after θ1…θ6), if it is
+/// in the model.
+fn params_of(cur: &Current, c: Candidate) -> Option<std::ops::Range<usize>> {
     let mut at = 6;
     for k in &cur.candidates {
+        let len = k.params().len();
         if *k == c {
-            return (m.bounds.iter().enumerate())
-                .all(|(j, (lo, hi))| (*lo..=*hi).contains(&cur.theta[at + j]));
+            return Some(at..at + len);
         }
-        at += k.params().len();
+        at += len;
     }
-    false
+    None
 }
 
 /// `cur` without the candidates of measured candidate `c`'s quantity (refitted; `c` itself
