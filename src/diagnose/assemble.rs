@@ -117,6 +117,23 @@ fn unexplained(
     })
 }
 
+/// The intervals \[s\] in which the training blocks could not place the change times of
+/// `cur`'s candidates, as their `findings` were found (time ± its half width,
+/// [`Data::unidentified`]): the search placed those times with every sample ([`place`]), so
+/// the validation samples there are not judged.
+fn training_intervals(findings: &[Finding], cur: &Current) -> Vec<(f64, f64)> {
+    cur.candidates
+        .iter()
+        .filter(|c| c.effect().search() == Search::ChangeTime)
+        .filter_map(|c| {
+            let f = findings.iter().find(|f| f.effect == c.name())?;
+            let name = c.params().first()?.name;
+            let (t, half) = (*f.parameters.get(name)?, *f.std_err.get(name)?);
+            (half.is_finite() && half > 0.0).then_some((t - half, t + half))
+        })
+        .collect()
+}
+
 /// The [`Diagnosis`] from the search's outcome.
 pub(super) fn assemble(
     data: &Data,
@@ -130,7 +147,7 @@ pub(super) fn assemble(
     // The final model is judged where it makes a claim (outside its unidentified intervals),
     // and the nominal model alike; then a change time is placed with every sample inside its
     // interval (never judged there).
-    let judged = data.judged(&[&out.cur]);
+    let judged = data.judged_outside(&training_intervals(&out.findings, &out.cur));
     let findings = &out.findings;
     let placed = place::change_times(data, &mut out.cur, |c| {
         let f = findings.iter().find(|f| f.effect == c.name())?;

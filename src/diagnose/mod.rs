@@ -54,8 +54,11 @@
 //!    autocorrelation. A change time (`payload_change`) is placed by a scan of the training
 //!    cost; its interval is the profile likelihood's 95 % one, n_eff ln(J(t)/J_min) ≤ χ²₁.
 //!    Where that interval spans validation samples the training blocks cannot place the
-//!    change inside it: every model compared with one that leaves such an interval open is
-//!    judged, as that one is, on the validation samples outside it. Then the search starts again from the extended
+//!    change inside it: the model that adds the change is judged, as the one without it, on
+//!    the validation samples outside it; once accepted, the time is placed with every sample
+//!    inside the interval (`place`) and held, so that later comparisons judge every
+//!    validation sample against a change where it happened (one parameter read off them),
+//!    while the final fits are still reported outside the interval. Then the search starts again from the extended
 //!    model (forward selection, at most [`DiagnoseSettings::max_effects`], until every channel
 //!    is fitted to [`SEARCH_FIT_PERCENT`]; effects that move one quantity the encoders see,
 //!    [`wheelid_core::Effect::quantity`], are alternatives: once one is in, the others are

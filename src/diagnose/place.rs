@@ -1,5 +1,5 @@
-//! After the search: a change time the training blocks cannot place is placed with every
-//! sample.
+//! A change time the training blocks cannot place is placed with every sample, as soon as
+//! the search accepts it (later fits hold it) and again in the report.
 //!
 //! A change (`payload_change`) inside a validation block leaves the training cost flat while
 //! its time sweeps that block: the fit reports the flat interval's middle and the interval as
@@ -7,9 +7,11 @@
 //! Once the effect is accepted, the time is placed by the cost over every sample (training and
 //! validation) inside that interval: the flat minimum of that cost (the profile likelihood's
 //! 95 % interval, n_eff ln(J(t)/J_min) ≤ χ²₁(0.95), n_eff every sample discounted for the
-//! residual's autocorrelation), on 33 times across the interval. The final model is still
-//! judged outside the training interval ([`super::assemble`] takes its mask before this), so
-//! the validation fit it reports never saw the samples that placed the time.
+//! residual's autocorrelation), on 33 times across the interval. The search's later
+//! comparisons then judge every validation sample (the time, one parameter, was read off
+//! them); the final model is still judged outside the training interval as its finding
+//! reported it ([`super::assemble`]), so the validation fit it reports never saw the samples
+//! that placed the time.
 
 use super::*;
 

@@ -86,6 +86,11 @@ impl Data {
     /// outside the models' unidentified intervals ([`Data::unidentified`]).
     pub(super) fn judged(&self, models: &[&Current]) -> Vec<Vec<bool>> {
         let gaps: Vec<(f64, f64)> = models.iter().flat_map(|m| self.unidentified(m)).collect();
+        self.judged_outside(&gaps)
+    }
+
+    /// Every validation sample outside the time intervals `gaps` \[s\].
+    pub(super) fn judged_outside(&self, gaps: &[(f64, f64)]) -> Vec<Vec<bool>> {
         self.recs
             .iter()
             .zip(&self.valid)

@@ -790,6 +790,12 @@ fn rounds(
         };
         let n = &round.nominees[i];
         out.findings.push(finding(data, n, &new, &after, drop));
+        // A change time the training blocks cannot place is placed with every sample now,
+        // not only in the report: later fits hold it, and held at its training interval's
+        // middle (up to half a validation block off) it would weigh against the effect in
+        // every later comparison, once the next refit has closed that interval.
+        let mut new = new;
+        place::change_times(data, &mut new, |_| None);
         tried.clear();
         cur = backward_step(
             data,
