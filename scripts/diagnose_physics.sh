@@ -56,8 +56,10 @@
 # 8c76ae1 (a tyre the independent heading does not show is refused); 1040 (single, clean;
 # pairs window_end) and clean 3771-3870 once at 484ef82 (a tyre the heading measures is named
 # and an amplifier searched beside it; 1040's pairs also with 8c76ae1's method, to see what it
-# changed), then 1040's strong amplifier beside a larger tyre was looked at; the next report
-# takes 1041.. and 3871.. .
+# changed), then 1040's strong amplifier beside a larger tyre was looked at; 1041 (single,
+# clean; pairs window_end) and clean 3871-3970 once at 8a6d7e7 (a change time placed with
+# every sample as soon as it is accepted; 1041's pairs also with 484ef82's method, to see what
+# it changed); the next report takes 1042.. and 3971.. .
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
