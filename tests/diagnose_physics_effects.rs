@@ -434,3 +434,30 @@ fn a_sagging_battery_is_named_beside_a_payload_set_down_in_a_validation_block() 
     let t = param("payload_change", "time_s");
     assert!((t - at_s).abs() < 0.2, "time_s {t}");
 }
+
+/// A voltage clamp beside a larger right tyre (1.0388) on the Pioneer-like robot, hold-out
+/// seed 1041's pair (looked at after its report). The heading measures the tyre, which is held
+/// within its bounds; what the hold leaves showed as a weak amplifier's fingerprint (χ² =
+/// 1129), and under the lowered gate of an overwhelming fingerprint an amplifier of 0.965 was
+/// named for a 1.7 % drop of the validation cost. Beside a measured effect the whole gate
+/// stands: the clamp and the tyre are named alone.
+#[test]
+fn no_amplifier_is_named_beside_a_measured_tyre_for_what_its_hold_leaves() {
+    let p = PhysicalProfile::pioneer3dx();
+    let mut s = PhysicsSettings {
+        seed: 1041,
+        ..PhysicsSettings::default()
+    };
+    s.effects.voltage_clamp = Some(10.844_620_044_398_127);
+    s.effects.tyre_radius_right = Some(1.038_844_303_112_316);
+    let e = p.random_multisine(1041).expect("excitation");
+    let rec = simulate_physics_recording(&p, &e, &s).expect("runs");
+    let model = wheelid::models::by_name(p.model_name()).expect("model");
+    let (d, named) = diagnosed_named(&rec, model.as_ref());
+    let text = wheelid::report::diagnosis_text(&d);
+    assert_eq!(named, ["effort_clamp", "tyre_asymmetry"], "{text}");
+    let refused = (d.rejected.iter())
+        .filter(|r| r.effect == "amp_asymmetry")
+        .any(|r| r.reason.contains("< 5 % drop"));
+    assert!(refused, "{text}");
+}

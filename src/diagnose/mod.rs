@@ -67,7 +67,8 @@
 //!    encoders) is then in the model whatever the dynamics show — in place of the candidates
 //!    of its quantity, fitted within the bounds its measurement allows, held, and named with
 //!    the measurement as its evidence — and the search goes on for the effects the encoders
-//!    cannot tell from it alone (a weak amplifier beside the tyre; `measured`). What stays
+//!    cannot tell from it alone (a weak amplifier beside the tyre; `measured`), under the
+//!    whole drop gate (what the measured effect's hold leaves shows as their fingerprint). What stays
 //!    significant or above the noise floor in a channel
 //!    fitted below [`PRACTICAL_FIT_PERCENT`] once the noise floor is taken out of its residual
 //!    ([`ChannelFit::noise_corrected_fit_percent`]: the sensor's own noise is no unexplained
@@ -163,7 +164,8 @@ pub struct DiagnoseSettings {
     /// Largest lag of the correlation tests \[s\].
     pub max_lag_s: f64,
     /// Smallest relative drop of the validation cost that counts as a clear improvement [-]
-    /// (30 % of it for a candidate nominated at p < 10⁻¹²: `accept::required_drop`).
+    /// (30 % of it for a candidate nominated at p < 10⁻¹², `accept::required_drop`, unless it
+    /// is searched beside a measured effect of its quantity).
     pub min_improvement: f64,
     /// Most effects added.
     pub max_effects: usize,
