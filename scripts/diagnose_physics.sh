@@ -59,7 +59,9 @@
 # changed), then 1040's strong amplifier beside a larger tyre was looked at; 1041 (single,
 # clean; pairs window_end) and clean 3871-3970 once at 8a6d7e7 (a change time placed with
 # every sample as soon as it is accepted; 1041's pairs also with 484ef82's method, to see what
-# it changed); the next report takes 1042.. and 3971.. .
+# it changed); 1041's clamp beside a larger tyre was then looked at (the whole drop gate beside
+# a measured effect, 4a1c2ad); 1042 (single, clean; pairs window_end) and clean 3971-4070 once
+# at 4a1c2ad; the next report takes 1043.. and 4071.. .
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions

@@ -199,6 +199,39 @@ fn diagnosed_named(
     (d, named)
 }
 
+/// The Pioneer-like robot's recording of the physics harness's seed `seed` (its random
+/// multisine, the default 120 s and window-end stamps, the chassis's true heading) with the
+/// effects `tweak` sets, and the model its controller implies.
+fn pioneer_recording(
+    seed: u64,
+    tweak: impl Fn(&mut PhysicsSettings),
+) -> (
+    wheelid::core::Recording,
+    Box<dyn wheelid::core::RegressorModel>,
+) {
+    let p = PhysicalProfile::pioneer3dx();
+    let mut s = PhysicsSettings {
+        seed,
+        ..PhysicsSettings::default()
+    };
+    tweak(&mut s);
+    let e = p.random_multisine(seed).expect("excitation");
+    let rec = simulate_physics_recording(&p, &e, &s).expect("runs");
+    let model = wheelid::models::by_name(p.model_name()).expect("model");
+    (rec, model)
+}
+
+/// Parameter `name` of finding `effect` in `d`.
+///
+/// # Panics
+/// Where `d` names no `effect` with that parameter.
+fn finding_param(d: &Diagnosis, effect: &str, name: &str) -> f64 {
+    (d.findings.iter())
+        .find(|f| f.effect == effect)
+        .and_then(|f| f.parameters.get(name).copied())
+        .unwrap_or_else(|| panic!("no {effect}.{name}"))
+}
+
 /// The named effects of `d` and the parameter `param` of `effect`, printing the report when
 /// `want` is not exactly what was named.
 fn named_param(d: &Diagnosis, want: &str, param: &str) -> Option<f64> {
@@ -302,17 +335,11 @@ fn a_payload_inside_a_validation_block_is_placed_with_every_sample() {
 /// is not used, and the tyre comes back.
 #[test]
 fn a_weak_amplifier_is_not_named_a_larger_tyre_the_heading_does_not_show() {
-    let p = PhysicalProfile::pioneer3dx();
-    let mut s = PhysicsSettings {
-        seed: 1037,
-        ..PhysicsSettings::default()
-    };
-    s.effects.amp_gain_right = Some(0.927_889_096_257_528_9);
-    s.effects.gain_sag = Some(0.206_279_621_009_177_07);
-    let e = p.random_multisine(1037).expect("excitation");
-    let mut rec = simulate_physics_recording(&p, &e, &s).expect("runs");
+    let (mut rec, model) = pioneer_recording(1037, |s| {
+        s.effects.amp_gain_right = Some(0.927_889_096_257_528_9);
+        s.effects.gain_sag = Some(0.206_279_621_009_177_07);
+    });
     assert_eq!(rec.meta(wheelid::core::POSE_SOURCE), Some("ground_truth"));
-    let model = wheelid::models::by_name(p.model_name()).expect("model");
     let run = |rec: &wheelid::core::Recording| diagnosed_named(rec, model.as_ref());
     let (d, named) = run(&rec);
     assert_eq!(
@@ -327,10 +354,7 @@ fn a_weak_amplifier_is_not_named_a_larger_tyre_the_heading_does_not_show() {
         .find(|r| r.effect == "tyre_asymmetry")
         .expect("the tyre was fitted");
     assert!(refused.reason.contains("heading"), "{}", refused.reason);
-    let gain = (d.findings.iter())
-        .find(|f| f.effect == "amp_asymmetry")
-        .and_then(|f| f.parameters.get("right_gain").copied())
-        .expect("right_gain");
+    let gain = finding_param(&d, "amp_asymmetry", "right_gain");
     assert!((gain / 0.927_889 - 1.0).abs() < 0.02, "right_gain {gain}");
     assert!(d.heading.is_none(), "equal tyres: {:?}", d.heading);
     rec.set_meta(wheelid::core::POSE_SOURCE, "odometry");
@@ -347,27 +371,16 @@ fn a_weak_amplifier_is_not_named_a_larger_tyre_the_heading_does_not_show() {
 /// odometry, one imbalance is named.
 #[test]
 fn a_larger_tyre_the_heading_measures_is_named_beside_a_weak_amplifier() {
-    let p = PhysicalProfile::pioneer3dx();
     let (amp, rho) = (0.930_313_033_110_953_7, 1.041_426_744_526_988_7);
-    let mut s = PhysicsSettings {
-        seed: 1029,
-        ..PhysicsSettings::default()
-    };
-    s.effects.amp_gain_right = Some(amp);
-    s.effects.tyre_radius_right = Some(rho);
-    let e = p.random_multisine(1029).expect("excitation");
-    let mut rec = simulate_physics_recording(&p, &e, &s).expect("runs");
-    let model = wheelid::models::by_name(p.model_name()).expect("model");
+    let (mut rec, model) = pioneer_recording(1029, |s| {
+        s.effects.amp_gain_right = Some(amp);
+        s.effects.tyre_radius_right = Some(rho);
+    });
     let run = |rec: &wheelid::core::Recording| diagnosed_named(rec, model.as_ref());
     let (d, named) = run(&rec);
     let text = wheelid::report::diagnosis_text(&d);
     assert_eq!(named, ["amp_asymmetry", "tyre_asymmetry"], "{text}");
-    let param = |effect: &str, name: &str| {
-        (d.findings.iter())
-            .find(|f| f.effect == effect)
-            .and_then(|f| f.parameters.get(name).copied())
-            .expect("a parameter")
-    };
+    let param = |effect: &str, name: &str| finding_param(&d, effect, name);
     let tyre = d.findings.iter().find(|f| f.effect == "tyre_asymmetry");
     assert!(
         tyre.is_some_and(|f| f.evidence.contains("measured")),
@@ -401,34 +414,23 @@ fn a_larger_tyre_the_heading_measures_is_named_beside_a_weak_amplifier() {
 #[test]
 fn a_sagging_battery_is_named_beside_a_payload_set_down_in_a_validation_block() {
     use wheelid::robots::physics::Payload;
-    let p = PhysicalProfile::pioneer3dx();
     let (fraction, at_s) = (0.128_300_735_442_876_73, 73.553_669_021_120_53);
-    let mut s = PhysicsSettings {
-        seed: 1017,
-        ..PhysicsSettings::default()
-    };
-    s.effects.gain_sag = Some(fraction);
-    s.effects.payload = Some(Payload {
-        mass_kg: 3.529_258_634_492_408_4,
-        at_s,
-        x_m: 0.089_469_567_447_771_67,
-        size_m: 0.11,
+    let (rec, model) = pioneer_recording(1017, |s| {
+        s.effects.gain_sag = Some(fraction);
+        s.effects.payload = Some(Payload {
+            mass_kg: 3.529_258_634_492_408_4,
+            at_s,
+            x_m: 0.089_469_567_447_771_67,
+            size_m: 0.11,
+        });
     });
-    let e = p.random_multisine(1017).expect("excitation");
-    let rec = simulate_physics_recording(&p, &e, &s).expect("runs");
-    let model = wheelid::models::by_name(p.model_name()).expect("model");
     let (d, named) = diagnosed_named(&rec, model.as_ref());
     let text = wheelid::report::diagnosis_text(&d);
     assert_eq!(named, ["gain_drift", "payload_change"], "{text}");
-    let param = |effect: &str, name: &str| {
-        (d.findings.iter())
-            .find(|f| f.effect == effect)
-            .and_then(|f| f.parameters.get(name).copied())
-            .expect("a parameter")
-    };
+    let param = |effect: &str, name: &str| finding_param(&d, effect, name);
     // The sag's mean rate over the run, −fraction/T.
     let rate = param("gain_drift", "rate_per_s");
-    let want = -fraction / s.duration_s;
+    let want = -fraction / PhysicsSettings::default().duration_s;
     println!("rate_per_s {rate:.3e} vs {want:.3e}");
     assert!((rate / want - 1.0).abs() < 0.2, "rate_per_s {rate}");
     let t = param("payload_change", "time_s");
@@ -443,16 +445,10 @@ fn a_sagging_battery_is_named_beside_a_payload_set_down_in_a_validation_block() 
 /// stands: the clamp and the tyre are named alone.
 #[test]
 fn no_amplifier_is_named_beside_a_measured_tyre_for_what_its_hold_leaves() {
-    let p = PhysicalProfile::pioneer3dx();
-    let mut s = PhysicsSettings {
-        seed: 1041,
-        ..PhysicsSettings::default()
-    };
-    s.effects.voltage_clamp = Some(10.844_620_044_398_127);
-    s.effects.tyre_radius_right = Some(1.038_844_303_112_316);
-    let e = p.random_multisine(1041).expect("excitation");
-    let rec = simulate_physics_recording(&p, &e, &s).expect("runs");
-    let model = wheelid::models::by_name(p.model_name()).expect("model");
+    let (rec, model) = pioneer_recording(1041, |s| {
+        s.effects.voltage_clamp = Some(10.844_620_044_398_127);
+        s.effects.tyre_radius_right = Some(1.038_844_303_112_316);
+    });
     let (d, named) = diagnosed_named(&rec, model.as_ref());
     let text = wheelid::report::diagnosis_text(&d);
     assert_eq!(named, ["effort_clamp", "tyre_asymmetry"], "{text}");
