@@ -61,7 +61,9 @@
 # every sample as soon as it is accepted; 1041's pairs also with 484ef82's method, to see what
 # it changed); 1041's clamp beside a larger tyre was then looked at (the whole drop gate beside
 # a measured effect, 4a1c2ad); 1042 (single, clean; pairs window_end) and clean 3971-4070 once
-# at 4a1c2ad; the next report takes 1043.. and 4071.. .
+# at 4a1c2ad, then 1042's latency beside the floor was looked at (an overwhelming fingerprint
+# is fitted whatever its start above the noise floor); the next report takes 1043.. and
+# 4071.. .
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
