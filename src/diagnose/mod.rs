@@ -91,6 +91,7 @@
 
 mod accept;
 mod assemble;
+mod budget;
 mod excerpt;
 mod fingerprint;
 mod fit;

@@ -345,8 +345,9 @@ fn first_accepted(
             continue;
         }
         let accepted = best.is_some().then_some(first_start);
-        let strong = round.nominees[i].p_value < STRONG_FINGERPRINT_P;
-        if let Some(reason) = not_fitted(c, (start_cost, now), accepted, (misfit, strong), settings)
+        let p = round.nominees[i].p_value;
+        if let Some(reason) =
+            budget::not_fitted(c, (start_cost, now), accepted, (misfit, p), settings)
         {
             rejected.push(Rejected {
                 effect: c.name().into(),
@@ -434,8 +435,8 @@ impl Ahead {
         (pos + 1..self.len()).find(|&q| {
             let (j, cost) = self.nominee(q);
             let c = round.nominees[j].pattern.candidate;
-            let strong = round.nominees[j].p_value < STRONG_FINGERPRINT_P;
-            not_fitted(c, (cost, now), Some(least), (misfit, strong), settings).is_none()
+            let p = round.nominees[j].p_value;
+            budget::not_fitted(c, (cost, now), Some(least), (misfit, p), settings).is_none()
         })
     }
 
@@ -476,16 +477,6 @@ type Accepted = (usize, Current, Channels, f64);
 /// Fits tried after the first accepted one in a round ([`first_accepted`]).
 const MORE_FITS: usize = 2;
 
-/// A rival is fitted after the first accepted candidate only if its screened start's training
-/// cost is within this factor of the accepted one's start ([`first_accepted`]): a start that
-/// explains several times less of the residual does not come back to win on the validation
-/// blocks. A candidate fitted by differences ([`wheelid_core::Effect::differenced`]) is never a
-/// rival, and is fitted only where its start already lowers the training cost by
-/// `min_improvement`: one fit of it costs as much as all the others' together (on tuning seeds
-/// the slippery floor's starts lower it by 59–85 %; starts that raised it 3.5-fold were fitted
-/// for 17 s each and refused).
-const RIVAL_START_FACTOR: f64 = 3.0;
-
 /// The free parameters candidate `c` adds in `new` (the last of its candidates).
 fn free_params(c: Candidate, new: &Current) -> usize {
     let base = new.theta.len() - c.params().len();
@@ -504,55 +495,6 @@ fn outscored(c: Candidate, score: f64, winner: &Accepted, best: f64) -> Rejected
             100.0 * winner.3
         ),
     }
-}
-
-/// Why candidate `c`, whose screened start's training cost is `start` (the current model's:
-/// `now`), is not fitted in this round, if it is not: a model fitted by differences whose
-/// start does not already lower the cost by `min_improvement` — or, where the current model
-/// leaves a channel above the noise floor (`misfit`, [`above_floor`]), does not lower it at
-/// all, unless its fingerprint is overwhelming (`strong`, p < [`STRONG_FINGERPRINT_P`]: a
-/// traction limit's start, linearised beside an unmodelled dead time of one period, raised
-/// the cost by 3.5 % at p = 6.6e-25, hold-out seed 1042) — or a rival (the first accepted
-/// candidate's start cost `accepted`) outside [`RIVAL_START_FACTOR`] or fitted by
-/// differences.
-fn not_fitted(
-    c: Candidate,
-    (start, now): (f64, f64),
-    accepted: Option<f64>,
-    (misfit, strong): (bool, bool),
-    settings: &DiagnoseSettings,
-) -> Option<String> {
-    let differenced = c.effect().differenced();
-    let gain = 1.0 - start / now;
-    // A traction limit behind a rate limit binds only where the limited setpoint still
-    // outruns the floor: its probed start lowers the cost by 0.5–4.8 % on the tuning seeds'
-    // missed pairs, where the model in hand leaves ω at 73–84 % (fitted: 96–99 %).
-    let enough = if misfit {
-        gain > 0.0 || strong
-    } else {
-        gain >= settings.min_improvement
-    };
-    if differenced && !enough {
-        return Some(format!(
-            "not fitted: its screened start changes the training cost by {:+.1} % (a model \
-             fitted by differences is fitted where its start already lowers it by {:.0} %, \
-             or at all where the model in hand is above the noise floor)",
-            -100.0 * gain,
-            100.0 * settings.min_improvement
-        ));
-    }
-    let ratio = start / accepted?;
-    let why = if ratio > RIVAL_START_FACTOR {
-        format!("(> {RIVAL_START_FACTOR})")
-    } else if differenced {
-        "(a model fitted by differences is never a rival)".into()
-    } else {
-        return None;
-    };
-    Some(format!(
-        "not fitted: its screened start leaves {ratio:.1}× the training cost of the accepted \
-         candidate's {why}"
-    ))
 }
 
 /// Most fits continued along a fingerprint that stays ([`Refusal::continue_from`]).
@@ -974,34 +916,5 @@ mod tests {
             "{} vs {drop}",
             got.explained
         );
-    }
-
-    /// The fit budget's rules on closed-form costs: a model fitted by differences needs a
-    /// start 5 % better than the current model's and is never a rival; any rival needs a start
-    /// within 3× the first accepted one's.
-    #[test]
-    fn who_is_not_fitted() {
-        let s = DiagnoseSettings::default();
-        let (traction, delay) = (Candidate::TRACTION_LIMIT, Candidate::INPUT_DELAY);
-        // First of the round: only the differenced one's own gain counts.
-        assert!(not_fitted(traction, (96.0, 100.0), None, (false, false), &s).is_some());
-        assert!(not_fitted(traction, (350.0, 100.0), None, (false, false), &s).is_some());
-        assert!(not_fitted(traction, (94.0, 100.0), None, (false, false), &s).is_none());
-        assert!(not_fitted(delay, (350.0, 100.0), None, (false, false), &s).is_none());
-        // Rivals of a candidate accepted from a start of 20.
-        assert!(not_fitted(delay, (59.0, 100.0), Some(20.0), (false, false), &s).is_none());
-        let far =
-            not_fitted(delay, (70.0, 100.0), Some(20.0), (false, false), &s).expect("outside 3×");
-        assert!(far.contains("3.5×"), "{far}");
-        assert!(not_fitted(traction, (21.0, 100.0), Some(20.0), (false, false), &s).is_some());
-        // A NaN start cost is no gain.
-        assert!(not_fitted(traction, (f64::NAN, 100.0), None, (false, false), &s).is_some());
-        // Where the model in hand is above the noise floor, any lower start is fitted.
-        assert!(not_fitted(traction, (99.0, 100.0), None, (true, false), &s).is_none());
-        assert!(not_fitted(traction, (100.5, 100.0), None, (true, false), &s).is_some());
-        assert!(not_fitted(traction, (f64::NAN, 100.0), None, (true, false), &s).is_some());
-        // … and an overwhelming fingerprint whatever its start, but not on a good model.
-        assert!(not_fitted(traction, (103.5, 100.0), None, (true, true), &s).is_none());
-        assert!(not_fitted(traction, (103.5, 100.0), None, (false, true), &s).is_some());
     }
 }
