@@ -62,8 +62,10 @@
 # it changed); 1041's clamp beside a larger tyre was then looked at (the whole drop gate beside
 # a measured effect, 4a1c2ad); 1042 (single, clean; pairs window_end) and clean 3971-4070 once
 # at 4a1c2ad, then 1042's latency beside the floor was looked at (an overwhelming fingerprint
-# is fitted whatever its start above the noise floor); the next report takes 1043.. and
-# 4071.. .
+# is fitted whatever its start above the noise floor); 1043 (single, clean; pairs window_end)
+# and clean 4071-4170 once at dd6e5b2, then 1043's Khepera-like clamps beside a rate limit
+# and the floor were looked at (the drop gate falls with the fingerprint's strength); the
+# next report takes 1044.. and 4171.. .
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
