@@ -165,8 +165,8 @@ pub struct DiagnoseSettings {
     /// Largest lag of the correlation tests \[s\].
     pub max_lag_s: f64,
     /// Smallest relative drop of the validation cost that counts as a clear improvement [-]
-    /// (30 % of it for a candidate nominated at p < 10⁻¹², `accept::required_drop`, unless it
-    /// is searched beside a measured effect of its quantity).
+    /// (15–30 % of it for a candidate nominated at p < 10⁻¹², `accept::required_drop`, unless
+    /// it is searched beside a measured effect of its quantity).
     pub min_improvement: f64,
     /// Most effects added.
     pub max_effects: usize,
