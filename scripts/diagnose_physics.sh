@@ -64,8 +64,11 @@
 # at 4a1c2ad, then 1042's latency beside the floor was looked at (an overwhelming fingerprint
 # is fitted whatever its start above the noise floor); 1043 (single, clean; pairs window_end)
 # and clean 4071-4170 once at dd6e5b2, then 1043's Khepera-like clamps beside a rate limit
-# and the floor were looked at (the drop gate falls with the fingerprint's strength); the
-# next report takes 1044.. and 4171.. .
+# and the floor were looked at (the drop gate falls with the fingerprint's strength, c17523b);
+# 1044 (single, clean; pairs window_end) and clean 4171-4270 once at c17523b, then 1044's
+# amplifier beside a larger tyre was looked at (434f94c); 1045 (single, clean; pairs
+# window_end) and clean 4271-4370 once at 434f94c (1045's pairs also with dd6e5b2's method,
+# to see what the two changes did); the next report takes 1046.. and 4371.. .
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
