@@ -532,3 +532,21 @@ fn a_measured_tyre_held_at_its_bound_is_named_beside_a_strong_amplifier() {
         .expect("a standard error");
     assert!(tyre > 1.01 && tyre_se > 0.0, "{tyre} ± {tyre_se}");
 }
+
+/// A sagging battery beside dry friction on the Pioneer-like robot (hold-out seed 1045's
+/// magnitudes, looked at after its report) is named `gain_drift` and `vw_friction`, without
+/// the 0.6 % payload step that took what they leave (a payload is named from 2 % of θ1 or
+/// θ2 on, `payload_change::MIN_PAYLOAD_EFFECT`).
+#[test]
+fn no_payload_is_named_for_what_a_battery_beside_dry_friction_leaves() {
+    let (rec, model) = pioneer_recording(1045, |s| {
+        s.effects.gain_sag = Some(0.264_249_323_895_480_06);
+        s.effects.dry_friction_nm = Some(0.066_746_710_419_559_54);
+    });
+    let (d, named) = diagnosed_named(&rec, model.as_ref());
+    let text = wheelid::report::diagnosis_text(&d);
+    assert_eq!(named, ["gain_drift", "vw_friction"], "{text}");
+    let rate = finding_param(&d, "gain_drift", "rate_per_s");
+    let truth = -0.264_249_323_895_480_06 / 120.0;
+    assert!((rate / truth - 1.0).abs() < 0.2, "rate_per_s {rate} vs {truth}");
+}
