@@ -548,5 +548,8 @@ fn no_payload_is_named_for_what_a_battery_beside_dry_friction_leaves() {
     assert_eq!(named, ["gain_drift", "vw_friction"], "{text}");
     let rate = finding_param(&d, "gain_drift", "rate_per_s");
     let truth = -0.264_249_323_895_480_06 / 120.0;
-    assert!((rate / truth - 1.0).abs() < 0.2, "rate_per_s {rate} vs {truth}");
+    assert!(
+        (rate / truth - 1.0).abs() < 0.2,
+        "rate_per_s {rate} vs {truth}"
+    );
 }
