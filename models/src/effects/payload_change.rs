@@ -97,7 +97,7 @@ impl Effect for PayloadChange {
         Ok(())
     }
     /// θ1 or θ2 after the change at least 3 σ (of the difference) from before, and one of
-    /// them at least [`MIN_PAYLOAD_EFFECT`] from it.
+    /// them at least `MIN_PAYLOAD_EFFECT` (2 %) from it.
     fn plausible_together(&self, fit: &FitData<'_>) -> std::result::Result<(), String> {
         let (c, b) = (fit.covariance, fit.base);
         let largest = (1..=2)
