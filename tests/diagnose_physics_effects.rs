@@ -496,10 +496,7 @@ fn a_clamp_beside_a_rate_limit_is_named_with_it() {
         });
         s.effects.voltage_clamp = Some(volts);
     });
-    let mut named: Vec<&str> = d.findings.iter().map(|f| f.effect.as_str()).collect();
-    named.sort_unstable();
-    let text = wheelid::report::diagnosis_text(&d);
-    assert_eq!(named, ["acceleration_limit", "effort_clamp"], "{text}");
+    assert_named_sorted(&d, &["acceleration_limit", "effort_clamp"]);
     let Controller::WheelPd { k_p, .. } = p.controller else {
         panic!("a wheel-PD profile");
     };
@@ -521,10 +518,7 @@ fn a_measured_tyre_held_at_its_bound_is_named_beside_a_strong_amplifier() {
         s.effects.amp_gain_right = Some(1.063_452_227_956_585_4);
         s.effects.tyre_radius_right = Some(1.033_013_056_610_346_4);
     });
-    let mut named: Vec<&str> = d.findings.iter().map(|f| f.effect.as_str()).collect();
-    named.sort_unstable();
-    let text = wheelid::report::diagnosis_text(&d);
-    assert_eq!(named, ["amp_asymmetry", "tyre_asymmetry"], "{text}");
+    assert_named_sorted(&d, &["amp_asymmetry", "tyre_asymmetry"]);
     let tyre = finding_param(&d, "tyre_asymmetry", "right_radius");
     let tyre_se = (d.findings.iter())
         .find(|f| f.effect == "tyre_asymmetry")
@@ -552,4 +546,12 @@ fn no_payload_is_named_for_what_a_battery_beside_dry_friction_leaves() {
         (rate / truth - 1.0).abs() < 0.2,
         "rate_per_s {rate} vs {truth}"
     );
+}
+
+/// Asserts that `d` names exactly `want` (sorted), printing the report where it does not.
+fn assert_named_sorted(d: &Diagnosis, want: &[&str]) {
+    let mut named: Vec<&str> = d.findings.iter().map(|f| f.effect.as_str()).collect();
+    named.sort_unstable();
+    let text = wheelid::report::diagnosis_text(d);
+    assert_eq!(named, want, "{text}");
 }
