@@ -68,7 +68,10 @@
 # 1044 (single, clean; pairs window_end) and clean 4171-4270 once at c17523b, then 1044's
 # amplifier beside a larger tyre was looked at (434f94c); 1045 (single, clean; pairs
 # window_end) and clean 4271-4370 once at 434f94c (1045's pairs also with dd6e5b2's method,
-# to see what the two changes did); the next report takes 1046.. and 4371.. .
+# to see what the two changes did), then 1044's and 1045's batteries beside dry friction were
+# looked at (a4ba811); 1046 (single, clean; pairs window_end) and clean 4371-4470 once at
+# a4ba811, then 1043's and 1045's larger tyres beside the floor were looked at (the tyre at its
+# contact inside the traction stage); the next report takes 1047.. and 4471.. .
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
