@@ -548,6 +548,30 @@ fn no_payload_is_named_for_what_a_battery_beside_dry_friction_leaves() {
     );
 }
 
+/// A larger right tyre (1.0495) on a slippery floor (μ = 0.053) on the Pioneer-like robot
+/// (hold-out seed 1043's pair, looked at after its report). The tyre acts at its contact: the
+/// right contact runs at ρ times its rim and turns the wheel back by ρ times its force, while
+/// the motor's effort turns the wheel whole. Composed as the tyre alone (the effort over ρ,
+/// the chassis row scaled) inside the traction stage, the slipping wheel answered the motor as
+/// a weak one, and a false amplifier of 0.972 was named beside the tyre and the floor. Now
+/// both are named alone, the tyre within 5 % of its departure from 1.
+#[test]
+fn a_larger_tyre_on_a_slippery_floor_is_named_without_an_amplifier() {
+    let tyre = 1.049_538_385_232_156_7;
+    let (rec, model) = pioneer_recording(1043, |s| {
+        s.effects.tyre_radius_right = Some(tyre);
+        s.effects.floor_mu = Some(0.053_347_648_321_123_056);
+    });
+    let (d, named) = diagnosed_named(&rec, model.as_ref());
+    let text = wheelid::report::diagnosis_text(&d);
+    assert_eq!(named, ["traction_limit", "tyre_asymmetry"], "{text}");
+    let rho = finding_param(&d, "tyre_asymmetry", "right_radius");
+    assert!(
+        ((rho - 1.0) / (tyre - 1.0) - 1.0).abs() < 0.05,
+        "right_radius {rho} vs {tyre}"
+    );
+}
+
 /// Asserts that `d` names exactly `want` (sorted), printing the report where it does not.
 fn assert_named_sorted(d: &Diagnosis, want: &[&str]) {
     let mut named: Vec<&str> = d.findings.iter().map(|f| f.effect.as_str()).collect();

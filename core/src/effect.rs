@@ -59,7 +59,9 @@ pub struct Terms {
     pub traction: Option<Traction>,
     /// The right wheel's row of the dynamics scaled: with the wheels' accelerations
     /// ṁ_R,L = v̇ ± (d/2) ω̇ (d the wheel track), ṁ_R × this factor [-] (a larger right tyre,
-    /// whose share of the chassis inertia grows as the encoders see it; `None`: 1).
+    /// whose share of the chassis inertia grows as the encoders see it; `None`: 1). Beside a
+    /// [`Traction`] stage the tyre acts at its contact instead: ρ = 1/this is read there, and
+    /// the row and the effort's 1/ρ are not applied to the wheels' own inertia.
     pub right_row: Option<f64>,
 }
 
