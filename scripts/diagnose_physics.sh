@@ -71,7 +71,10 @@
 # to see what the two changes did), then 1044's and 1045's batteries beside dry friction were
 # looked at (a4ba811); 1046 (single, clean; pairs window_end) and clean 4371-4470 once at
 # a4ba811, then 1043's and 1045's larger tyres beside the floor were looked at (the tyre at its
-# contact inside the traction stage); the next report takes 1047.. and 4471.. .
+# contact inside the traction stage, 050cd4a); 1047 (single, clean; pairs window_end) and
+# clean 4471-4570 once at 050cd4a, then 1047's clamp beside a larger tyre was looked at (the
+# tyre's lever after the clamp; an amplifier and a tyre multiply); the next report takes
+# 1048.. and 4571.. .
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
