@@ -438,24 +438,28 @@ fn a_sagging_battery_is_named_beside_a_payload_set_down_in_a_validation_block() 
 }
 
 /// A voltage clamp beside a larger right tyre (1.0388) on the Pioneer-like robot, hold-out
-/// seed 1041's pair (looked at after its report). The heading measures the tyre, which is held
-/// within its bounds; what the hold leaves showed as a weak amplifier's fingerprint (χ² =
+/// seed 1041's pair (looked at after its report). The heading measures the tyre, which was
+/// held within its bounds; what the hold left showed as a weak amplifier's fingerprint (χ² =
 /// 1129), and under the lowered gate of an overwhelming fingerprint an amplifier of 0.965 was
-/// named for a 1.7 % drop of the validation cost. Beside a measured effect the whole gate
-/// stands: the clamp and the tyre are named alone.
+/// named for a 1.7 % drop of the validation cost: beside a measured effect the whole gate
+/// stands. Since the tyre's lever acts after the clamp (the clamped wheel pushes the chassis
+/// 1/ρ as hard), the search names the tyre itself beside the clamp (1.035). The clamp and the
+/// tyre are named alone, the tyre within 20 % of its departure from 1.
 #[test]
 fn no_amplifier_is_named_beside_a_measured_tyre_for_what_its_hold_leaves() {
+    let tyre = 1.038_844_303_112_316;
     let (rec, model) = pioneer_recording(1041, |s| {
         s.effects.voltage_clamp = Some(10.844_620_044_398_127);
-        s.effects.tyre_radius_right = Some(1.038_844_303_112_316);
+        s.effects.tyre_radius_right = Some(tyre);
     });
     let (d, named) = diagnosed_named(&rec, model.as_ref());
     let text = wheelid::report::diagnosis_text(&d);
     assert_eq!(named, ["effort_clamp", "tyre_asymmetry"], "{text}");
-    let refused = (d.rejected.iter())
-        .filter(|r| r.effect == "amp_asymmetry")
-        .any(|r| r.reason.contains("< 5 % drop"));
-    assert!(refused, "{text}");
+    let rho = finding_param(&d, "tyre_asymmetry", "right_radius");
+    assert!(
+        ((rho - 1.0) / (tyre - 1.0) - 1.0).abs() < 0.2,
+        "right_radius {rho} vs {tyre}"
+    );
 }
 
 /// A command latency of one host period (0.104 s) beside a slippery floor on the Pioneer-like
@@ -568,6 +572,30 @@ fn a_larger_tyre_on_a_slippery_floor_is_named_without_an_amplifier() {
     let rho = finding_param(&d, "tyre_asymmetry", "right_radius");
     assert!(
         ((rho - 1.0) / (tyre - 1.0) - 1.0).abs() < 0.05,
+        "right_radius {rho} vs {tyre}"
+    );
+}
+
+/// A voltage clamp beside a larger right tyre (1.0342) on the Pioneer-like robot (hold-out
+/// seed 1047's pair, looked at after its report). The supply clamps the voltage before the
+/// tyre's lever acts, so the clamped wheel pushes the chassis 1/ρ as hard; the tyre's 1/ρ was
+/// applied before the clamp, and an amplifier fitted beside the measured tyre (whose apply
+/// replaced the tyre's effort factor instead of multiplying it) made up the difference: a
+/// false 0.974 amplifier. Now the clamp and the tyre are named alone, the tyre within 10 % of
+/// its departure from 1.
+#[test]
+fn a_clamped_wheel_with_a_larger_tyre_is_named_without_an_amplifier() {
+    let tyre = 1.034_157_040_023_514_7;
+    let (rec, model) = pioneer_recording(1047, |s| {
+        s.effects.voltage_clamp = Some(9.633_201_611_856_562);
+        s.effects.tyre_radius_right = Some(tyre);
+    });
+    let (d, named) = diagnosed_named(&rec, model.as_ref());
+    let text = wheelid::report::diagnosis_text(&d);
+    assert_eq!(named, ["effort_clamp", "tyre_asymmetry"], "{text}");
+    let rho = finding_param(&d, "tyre_asymmetry", "right_radius");
+    assert!(
+        ((rho - 1.0) / (tyre - 1.0) - 1.0).abs() < 0.1,
         "right_radius {rho} vs {tyre}"
     );
 }

@@ -112,8 +112,10 @@ pub const TRACTION_SLIP_SHARE: f64 = 0.02;
 /// The speed loop's effort per wheel (`amp_asymmetry`, `effort_clamp`): with E_v = u_v − g v,
 /// E_ω = u_ω − g ω the loop's efforts in eq. 2.19, the wheels' e_R,L = E_v ± κ E_ω
 /// (κ = `mix` · d/2); the right one is scaled by `right_gain`, both are clamped to
-/// ±`effort_max`, and they are recombined, (ē_R + ē_L)/2 and (ē_R − ē_L)/(2κ), in place of
-/// E_v, E_ω. An effect sets its fields and leaves the others.
+/// ±`effort_max`, the right one's clamped effort is scaled by `right_lever`, and they are
+/// recombined, (ē_R + ē_L)/2 and (ē_R − ē_L)/(2κ), in place of E_v, E_ω. An effect scales or
+/// sets its own fields and leaves the others (a weak amplifier and a larger tyre on one wheel
+/// multiply).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct WheelTerms {
     /// Right wheel's effort gain relative to the left's [-].
@@ -122,6 +124,10 @@ pub struct WheelTerms {
     pub effort_max: f64,
     /// κ relative to the wheel-PD loop's d/2 [-].
     pub mix: f64,
+    /// Right wheel's clamped effort's share on the chassis [-]: a larger tyre's 1/ρ, which
+    /// acts after the amplifier's supply clamps its voltage (the clamped wheel pushes the
+    /// chassis 1/ρ as hard).
+    pub right_lever: f64,
 }
 
 impl Default for WheelTerms {
@@ -130,6 +136,7 @@ impl Default for WheelTerms {
             right_gain: 1.0,
             effort_max: f64::INFINITY,
             mix: 1.0,
+            right_lever: 1.0,
         }
     }
 }

@@ -69,10 +69,11 @@ impl Effect for AmpAsymmetry {
         if p[0] <= 0.0 {
             return Err(Error::InvalidSetting("right_gain must be > 0".into()));
         }
+        // × rather than =: beside a larger tyre the two act on one wheel together.
         terms
             .wheels
             .get_or_insert_with(WheelTerms::default)
-            .right_gain = p[0];
+            .right_gain *= p[0];
         Ok(())
     }
 }

@@ -129,7 +129,7 @@ pub fn heading_ratio(recordings: &[Recording], track: f64) -> Option<(f64, f64)>
     (b.abs() > 0.0 && var.is_finite()).then(|| (a / b, var.max(0.0).sqrt()))
 }
 
-/// Right/left tyre radius ratio ρ (`Terms::wheels` right gain × 1/ρ and `Terms::right_row` =
+/// Right/left tyre radius ratio ρ (`Terms::wheels` right lever × 1/ρ and `Terms::right_row` =
 /// 1/ρ); null 1, fitted within [0.5, 2], plausible within [0.8, 1.25]; needs the wheel track.
 #[derive(Debug, Clone, Copy)]
 pub struct TyreAsymmetry;
@@ -220,7 +220,8 @@ impl Effect for TyreAsymmetry {
             return Err(Error::InvalidSetting("right_radius must be > 0".into()));
         }
         let wheels = terms.wheels.get_or_insert_with(WheelTerms::default);
-        wheels.right_gain /= p[0];
+        // After the clamp: the amplifier's supply limits the voltage, the tyre the lever.
+        wheels.right_lever /= p[0];
         terms.right_row = Some(terms.right_row.unwrap_or(1.0) / p[0]);
         Ok(())
     }

@@ -218,8 +218,8 @@ struct Field {
     /// Whether dry friction is present (its tanh dominates the cost of a step).
     dry: bool,
     slip: [f64; 2],
-    /// Per-wheel efforts: (right gain, effort_max [m/s], κ \[m\]).
-    wheels: Option<(f64, f64, f64)>,
+    /// Per-wheel efforts ([`wheelid_core::WheelTerms`], κ \[m\] in place of the mix).
+    wheels: Option<wheelid_core::WheelTerms>,
     /// The right wheel's row scale ([`wheelid_core::Terms::right_row`]).
     right_row: Option<f64>,
 }
@@ -234,9 +234,10 @@ impl Field {
             // Dry friction only when present: tanh dominates the cost of a step.
             dry: ph.coulomb != [0.0, 0.0],
             slip: ph.slip,
-            wheels: ph
-                .wheels
-                .map(|w| (w.right_gain, w.effort_max, w.mix * 0.5 * track)),
+            wheels: ph.wheels.map(|w| wheelid_core::WheelTerms {
+                mix: w.mix * 0.5 * track,
+                ..w
+            }),
             right_row: ph.right_row,
         }
     }
@@ -291,9 +292,9 @@ impl Field {
         let mut jf = [[0.0; 2]; 2];
         // ∂(clamped − unclamped effort)/∂u, for the command's sensitivities.
         let mut ju = [[0.0; 2]; 2];
-        if let Some((gain, cl, kappa)) = self.wheels {
+        if let Some(wt) = self.wheels {
             let e = [u[0] - c.g * v, u[1] - c.g * w];
-            let (df, dj) = wheel_correction(gain, cl, kappa, c.g, e);
+            let (df, dj) = wheel_correction(&wt, c.g, e);
             fv += df[0];
             fw += df[1];
             for r in 0..2 {
@@ -381,25 +382,25 @@ struct Local {
 }
 
 /// The per-wheel efforts' correction of eq. 2.19's efforts E = (E_v, E_ω)
-/// ([`wheelid_core::WheelTerms`]): Δ = (Ē_v − E_v, Ē_ω − E_ω) with the wheels' efforts
-/// E_v ± κ E_ω, the right one × `gain`, clamped to ±`cl`, and ∂Δ/∂(v, ω) for drive gain `g`
+/// ([`wheelid_core::WheelTerms`] `wt`, its `mix` as κ \[m\]): Δ = (Ē_v − E_v, Ē_ω − E_ω)
+/// with the wheels' efforts E_v ± κ E_ω, the right one × `right_gain`, clamped to
+/// ±`effort_max`, the right one then × `right_lever`, and ∂Δ/∂(v, ω) for drive gain `g`
 /// (E = u − g (v, ω)).
 #[inline]
 fn wheel_correction(
-    gain: f64,
-    cl: f64,
-    kappa: f64,
+    wt: &wheelid_core::WheelTerms,
     g: f64,
     e: [f64; 2],
 ) -> ([f64; 2], [[f64; 2]; 2]) {
+    let (gain, cl, kappa, lever) = (wt.right_gain, wt.effort_max, wt.mix, wt.right_lever);
     let wheels = [gain * (e[0] + kappa * e[1]), e[0] - kappa * e[1]];
-    let clamped = wheels.map(|x| x.clamp(-cl, cl));
+    let clamped = [lever * wheels[0].clamp(-cl, cl), wheels[1].clamp(-cl, cl)];
     let ev = 0.5 * (clamped[0] + clamped[1]);
     let ew = (clamped[0] - clamped[1]) / (2.0 * kappa);
     // Each wheel's slope on its own error: its gain where it follows, 0 where it is clamped.
     let [fr, fl] = [0, 1].map(|i| {
         if wheels[i].abs() < cl {
-            [gain, 1.0][i]
+            [gain * lever, 1.0][i]
         } else {
             0.0
         }

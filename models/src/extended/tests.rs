@@ -310,13 +310,17 @@ fn a_larger_tyre_is_the_amplifier_asymmetry_with_its_wheels_row_scaled() {
     let h = 0.5 * track;
     let tyre = Terms {
         wheels: Some(WheelTerms {
-            right_gain: 1.0 / rho,
+            right_lever: 1.0 / rho,
             ..WheelTerms::default()
         }),
         right_row: Some(1.0 / rho),
         ..Terms::default()
     };
     let amp = Terms {
+        wheels: Some(WheelTerms {
+            right_gain: 1.0 / rho,
+            ..WheelTerms::default()
+        }),
         right_row: None,
         ..tyre
     };
@@ -355,6 +359,61 @@ fn a_larger_tyre_is_the_amplifier_asymmetry_with_its_wheels_row_scaled() {
         approx::assert_abs_diff_eq!(yt[ch][399], ya[ch][399], epsilon = 1e-9);
         // …but not the transient.
         assert!((yt[ch][1] - ya[ch][1]).abs() > 1e-4, "{ch}");
+    }
+}
+
+/// A clamped wheel with a larger tyre pushes the chassis 1/ρ as hard; a weak amplifier's
+/// clamped wheel as hard as the other (the supply clamps the voltage after the amplifier's
+/// gain and before the tyre's lever). Demanding 1 m/s of effort on both wheels, clamped at
+/// 0.1: the tyre gives Ē_v = (0.1/ρ + 0.1)/2, Ē_ω = (0.1/ρ − 0.1)/(2κ); the amplifier
+/// Ē_v = 0.1, Ē_ω = 0. Unclamped (0.01 m/s) the two are the same 1/ρ. And a weak amplifier
+/// beside a larger tyre multiply, in either order of the effects.
+#[test]
+fn a_larger_tyre_acts_after_the_clamp_and_beside_an_amplifier() {
+    let (rho, cl, kappa) = (1.05, 0.1, 0.2);
+    let tyre = WheelTerms {
+        effort_max: cl,
+        mix: kappa,
+        right_lever: 1.0 / rho,
+        ..WheelTerms::default()
+    };
+    let amp = WheelTerms {
+        right_gain: 1.0 / rho,
+        right_lever: 1.0,
+        ..tyre
+    };
+    let (dt, _) = wheel_correction(&tyre, 1.0, [1.0, 0.0]);
+    approx::assert_relative_eq!(1.0 + dt[0], 0.5 * (cl / rho + cl), epsilon = 1e-12);
+    approx::assert_relative_eq!(dt[1], (cl / rho - cl) / (2.0 * kappa), epsilon = 1e-12);
+    let (da, _) = wheel_correction(&amp, 1.0, [1.0, 0.0]);
+    approx::assert_relative_eq!(1.0 + da[0], cl, epsilon = 1e-12);
+    approx::assert_abs_diff_eq!(da[1], 0.0, epsilon = 1e-12);
+    let small = [0.01, 0.0];
+    let ((ft, jt), (fa, ja)) = (
+        wheel_correction(&tyre, 1.0, small),
+        wheel_correction(&amp, 1.0, small),
+    );
+    for r in 0..2 {
+        approx::assert_relative_eq!(ft[r], fa[r], epsilon = 1e-15);
+        for k in 0..2 {
+            approx::assert_relative_eq!(jt[r][k], ja[r][k], epsilon = 1e-15);
+        }
+    }
+    use crate::effects::Candidate;
+    let apply = |order: &[(Candidate, f64)]| {
+        let mut terms = Terms::default();
+        for (c, p) in order {
+            c.effect().apply(&[*p], &mut terms).expect("applies");
+        }
+        terms.wheels.expect("wheel terms")
+    };
+    let (a, t) = (
+        (Candidate::AMP_ASYMMETRY, 0.95),
+        (Candidate::TYRE_ASYMMETRY, rho),
+    );
+    for w in [apply(&[a, t]), apply(&[t, a])] {
+        approx::assert_relative_eq!(w.right_gain, 0.95, epsilon = 1e-15);
+        approx::assert_relative_eq!(w.right_lever, 1.0 / rho, epsilon = 1e-15);
     }
 }
 

@@ -297,7 +297,7 @@ impl Extended {
         let mut at_rims = *ph;
         at_rims.right_row = None;
         if let Some(w) = at_rims.wheels.as_mut() {
-            w.right_gain *= rho;
+            w.right_lever *= rho;
         }
         let field = Field::new(forces, self.track, &at_rims);
         let prepare = |th: [f64; 6]| {
