@@ -20,7 +20,9 @@
 //! pairs went from 497 to 501 right: 10 weak or strong amplifiers beside a larger tyre
 //! named with it, 6 false amplifiers beside a larger tyre and a clamp (3), a slippery floor
 //! (2) or dry friction (1) on the Pioneer-like robot — the tyre meets the clamp and the
-//! floor's limit sooner, which its model does not know.
+//! floor's limit sooner, which its model did not know. Those were faults of composition: the
+//! tyre's lever is now applied after the clamp and at the floor's contact, and an amplifier
+//! beside it multiplies its effort factor instead of replacing it (050cd4a, a182b2f).
 
 use super::search::Outcome;
 use super::*;
