@@ -452,14 +452,7 @@ fn no_amplifier_is_named_beside_a_measured_tyre_for_what_its_hold_leaves() {
         s.effects.voltage_clamp = Some(10.844_620_044_398_127);
         s.effects.tyre_radius_right = Some(tyre);
     });
-    let (d, named) = diagnosed_named(&rec, model.as_ref());
-    let text = wheelid::report::diagnosis_text(&d);
-    assert_eq!(named, ["effort_clamp", "tyre_asymmetry"], "{text}");
-    let rho = finding_param(&d, "tyre_asymmetry", "right_radius");
-    assert!(
-        ((rho - 1.0) / (tyre - 1.0) - 1.0).abs() < 0.2,
-        "right_radius {rho} vs {tyre}"
-    );
+    assert_tyre_named_with(&rec, model.as_ref(), "effort_clamp", tyre, 0.2);
 }
 
 /// A command latency of one host period (0.104 s) beside a slippery floor on the Pioneer-like
@@ -566,14 +559,7 @@ fn a_larger_tyre_on_a_slippery_floor_is_named_without_an_amplifier() {
         s.effects.tyre_radius_right = Some(tyre);
         s.effects.floor_mu = Some(0.053_347_648_321_123_056);
     });
-    let (d, named) = diagnosed_named(&rec, model.as_ref());
-    let text = wheelid::report::diagnosis_text(&d);
-    assert_eq!(named, ["traction_limit", "tyre_asymmetry"], "{text}");
-    let rho = finding_param(&d, "tyre_asymmetry", "right_radius");
-    assert!(
-        ((rho - 1.0) / (tyre - 1.0) - 1.0).abs() < 0.05,
-        "right_radius {rho} vs {tyre}"
-    );
+    assert_tyre_named_with(&rec, model.as_ref(), "traction_limit", tyre, 0.05);
 }
 
 /// A voltage clamp beside a larger right tyre (1.0342) on the Pioneer-like robot (hold-out
@@ -590,12 +576,24 @@ fn a_clamped_wheel_with_a_larger_tyre_is_named_without_an_amplifier() {
         s.effects.voltage_clamp = Some(9.633_201_611_856_562);
         s.effects.tyre_radius_right = Some(tyre);
     });
-    let (d, named) = diagnosed_named(&rec, model.as_ref());
+    assert_tyre_named_with(&rec, model.as_ref(), "effort_clamp", tyre, 0.1);
+}
+
+/// Asserts that the diagnosis of `rec` names exactly `other` and `tyre_asymmetry`, the tyre's
+/// departure from 1 within the share `tol` of the true `tyre`'s.
+fn assert_tyre_named_with(
+    rec: &wheelid::core::Recording,
+    model: &dyn wheelid::core::RegressorModel,
+    other: &str,
+    tyre: f64,
+    tol: f64,
+) {
+    let (d, named) = diagnosed_named(rec, model);
     let text = wheelid::report::diagnosis_text(&d);
-    assert_eq!(named, ["effort_clamp", "tyre_asymmetry"], "{text}");
+    assert_eq!(named, [other, "tyre_asymmetry"], "{text}");
     let rho = finding_param(&d, "tyre_asymmetry", "right_radius");
     assert!(
-        ((rho - 1.0) / (tyre - 1.0) - 1.0).abs() < 0.1,
+        ((rho - 1.0) / (tyre - 1.0) - 1.0).abs() < tol,
         "right_radius {rho} vs {tyre}"
     );
 }
