@@ -73,8 +73,9 @@
 # a4ba811, then 1043's and 1045's larger tyres beside the floor were looked at (the tyre at its
 # contact inside the traction stage, 050cd4a); 1047 (single, clean; pairs window_end) and
 # clean 4471-4570 once at 050cd4a, then 1047's clamp beside a larger tyre was looked at (the
-# tyre's lever after the clamp; an amplifier and a tyre multiply); the next report takes
-# 1048.. and 4571.. .
+# tyre's lever after the clamp; an amplifier and a tyre multiply, a182b2f); 1048 (single,
+# clean; pairs window_end) and clean 4571-4670 once at a182b2f; the next report takes 1049..
+# and 4671.. .
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
