@@ -514,7 +514,8 @@ mod tests {
 
     /// ROS2's Jacobian ∂ż/∂z (the contact's by hand, the field's from [`Field::local`]) is the
     /// right-hand side's central differences, in grip, on the grip's knee and in slip, with
-    /// dry friction and slip terms in the field.
+    /// dry friction and slip terms in the field, with equal tyres and with a larger right one
+    /// (ρ = 1.05: its contact's speed and lever).
     #[test]
     fn the_contacts_jacobian_is_its_differences() {
         let ph = Terms {
@@ -530,12 +531,22 @@ mod tests {
             mix: 1.2,
             load_transfer: 0.2,
         };
-        let contact = Contact::new(&tr, &th, 0.33, 1.0);
         let inv = [1.0 / th[0], 1.0 / th[1]];
         let c = Cmd::<0>::at([0.4, 0.3], [[]; 2], false);
-        let rhs = |z: &[f64; 4], jac| {
-            contact.rhs(&th, z, |vw, jac| field.local(&th, &inv, vw, &c, jac), jac)
-        };
+        for rho in [1.0, 1.05] {
+            let contact = Contact::new(&tr, &th, 0.33, rho);
+            jacobian_matches_differences(&contact, &|z: &[f64; 4], jac| {
+                contact.rhs(&th, z, |vw, jac| field.local(&th, &inv, vw, &c, jac), jac)
+            });
+        }
+    }
+
+    /// `rhs`'s Jacobian against its central differences at three states of `contact` (in
+    /// grip, on the knee, in slip), to 1e-6 of its largest entry.
+    fn jacobian_matches_differences(
+        contact: &Contact,
+        rhs: &dyn Fn(&[f64; 4], bool) -> ([f64; 4], nalgebra::Matrix4<f64>),
+    ) {
         let s0 = contact.s0;
         for z in [
             [0.3, 0.2, 0.1 * s0, -0.05 * s0],
@@ -555,7 +566,8 @@ mod tests {
                     let err = (j[(row, col)] - central).abs();
                     assert!(
                         err <= 1e-6 * scale,
-                        "z {z:?} ({row}, {col}): {err} of {scale}"
+                        "ρ {} z {z:?} ({row}, {col}): {err} of {scale}",
+                        contact.rho
                     );
                 }
             }
