@@ -541,11 +541,14 @@ mod tests {
         }
     }
 
+    /// ∂ż/∂z of the contact's state.
+    type Jacobian = nalgebra::Matrix4<f64>;
+
     /// `rhs`'s Jacobian against its central differences at three states of `contact` (in
     /// grip, on the knee, in slip), to 1e-6 of its largest entry.
     fn jacobian_matches_differences(
         contact: &Contact,
-        rhs: &dyn Fn(&[f64; 4], bool) -> ([f64; 4], nalgebra::Matrix4<f64>),
+        rhs: &dyn Fn(&[f64; 4], bool) -> ([f64; 4], Jacobian),
     ) {
         let s0 = contact.s0;
         for z in [
