@@ -541,15 +541,12 @@ mod tests {
         }
     }
 
-    /// ∂ż/∂z of the contact's state.
-    type Jacobian = nalgebra::Matrix4<f64>;
+    /// The contact's ż and ∂ż/∂z at a state, with or without the Jacobian.
+    type ContactRhs<'a> = dyn Fn(&[f64; 4], bool) -> ([f64; 4], nalgebra::Matrix4<f64>) + 'a;
 
     /// `rhs`'s Jacobian against its central differences at three states of `contact` (in
     /// grip, on the knee, in slip), to 1e-6 of its largest entry.
-    fn jacobian_matches_differences(
-        contact: &Contact,
-        rhs: &dyn Fn(&[f64; 4], bool) -> ([f64; 4], Jacobian),
-    ) {
+    fn jacobian_matches_differences(contact: &Contact, rhs: &ContactRhs<'_>) {
         let s0 = contact.s0;
         for z in [
             [0.3, 0.2, 0.1 * s0, -0.05 * s0],
