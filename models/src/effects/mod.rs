@@ -30,7 +30,7 @@ pub use input_delay::InputDelay;
 pub use payload_change::PayloadChange;
 pub use slip::Slip;
 pub use traction_limit::TractionLimit;
-pub use tyre_asymmetry::{HEADING_SHARE, MEASURED_Z, TyreAsymmetry, heading_ratio};
+pub use tyre_asymmetry::{FAR_SHARE, HEADING_SHARE, MEASURED_Z, TyreAsymmetry, heading_ratio};
 pub use velocity_saturation::VelocitySaturation;
 pub use vw_friction::VwFriction;
 pub use wheel_asymmetry::WheelAsymmetry;
