@@ -579,6 +579,48 @@ fn a_clamped_wheel_with_a_larger_tyre_is_named_without_an_amplifier() {
     assert_tyre_named_with(&rec, model.as_ref(), "effort_clamp", tyre, 0.1);
 }
 
+/// A voltage clamp (8.12 V) beside a payload (3.19 kg set down at 60.6 s) on the Pioneer-like
+/// robot, hold-out seed 1048's pair (looked at after its report). The loop's derivative term
+/// (K_DT/K_PT = 1.5/66 s, 9 % of θ1) vanishes while a wheel is clamped, so the clamp in effort
+/// units came out c/(1 − K_DT/(K_PT θ1)), 10 % high, and once the payload moved θ1 that ratio
+/// moved: a drive gain drifting +0.0002/s was named beside them. With the derivative term in
+/// the clamp (`derivative_s`, freed beside the payload) the two are named alone, the clamp
+/// within 5 % of V/K_PT and the derivative term within 20 % of K_DT/K_PT.
+#[test]
+fn a_clamp_beside_a_payload_is_named_with_its_loops_derivative_term() {
+    use wheelid::robots::physics::Payload;
+    let volts = 8.118_364_003_527_573;
+    let (rec, model) = pioneer_recording(1048, |s| {
+        s.effects.voltage_clamp = Some(volts);
+        s.effects.payload = Some(Payload {
+            mass_kg: 3.193_100_519_178_434,
+            at_s: 60.567_872_169_946_72,
+            x_m: 0.038_328_007_346_050_956,
+            size_m: 0.11,
+        });
+    });
+    let (d, named) = diagnosed_named(&rec, model.as_ref());
+    let text = wheelid::report::diagnosis_text(&d);
+    assert_eq!(named, ["effort_clamp", "payload_change"], "{text}");
+    let Controller::VwPd { k_pt, k_dt, .. } = PhysicalProfile::pioneer3dx().controller else {
+        panic!("the Pioneer-like profile has a v/ω loop");
+    };
+    let (c, delta) = (
+        finding_param(&d, "effort_clamp", "effort_max"),
+        finding_param(&d, "effort_clamp", "derivative_s"),
+    );
+    println!(
+        "effort_max {c:.4} vs {:.4}, derivative_s {delta:.4} vs {:.4}",
+        volts / k_pt,
+        k_dt / k_pt
+    );
+    assert!((c / (volts / k_pt) - 1.0).abs() < 0.05, "effort_max {c}");
+    assert!(
+        (delta / (k_dt / k_pt) - 1.0).abs() < 0.2,
+        "derivative_s {delta}"
+    );
+}
+
 /// Asserts that the diagnosis of `rec` names exactly `other` and `tyre_asymmetry`, the tyre's
 /// departure from 1 within the share `tol` of the true `tyre`'s.
 fn assert_tyre_named_with(

@@ -128,6 +128,9 @@ pub struct WheelTerms {
     /// acts after the amplifier's supply clamps its voltage (the clamped wheel pushes the
     /// chassis 1/ρ as hard).
     pub right_lever: f64,
+    /// The speed loop's derivative gain over its proportional gain, K_D/K_P \[s\]: the share
+    /// of θ1, θ2 that a clamped wheel loses with its feedback (0: none; §2.2, Appendix A.3).
+    pub derivative: f64,
 }
 
 impl Default for WheelTerms {
@@ -137,6 +140,7 @@ impl Default for WheelTerms {
             effort_max: f64::INFINITY,
             mix: 1.0,
             right_lever: 1.0,
+            derivative: 0.0,
         }
     }
 }
@@ -428,6 +432,14 @@ pub trait Effect: Send + Sync + std::fmt::Debug {
     /// smaller iteration budget.
     fn differenced(&self) -> bool {
         false
+    }
+    /// Its parameters that the data may not separate from the others until those are fitted
+    /// (the clamp's derivative term, which trades with its level on one θ1), each (index, a
+    /// start inside its bounds for θ1…θ6 = `theta`): the diagnosis fits the effect with them
+    /// held at their null first, then frees them from that fit — from the null and from the
+    /// start — and keeps the cheaper refit where it costs less. Default: none.
+    fn secondary(&self, _theta: &[f64]) -> Vec<(usize, f64)> {
+        Vec::new()
     }
     /// What a sensor other than the encoders measures of it on `recordings` (wheel track
     /// `track` \[m\] if known), where it does: an independent heading measures a larger

@@ -239,6 +239,13 @@ fn draw_demanded(
                 Controller::VwPd { k_pt, .. } => volts / k_pt,
             };
             m.insert("effort_max".into(), effort);
+            // The loop's derivative term (`derivative_s`): k_D/k_P; K_DT/K_PT (K_DR/K_PR the ω
+            // loop's, about the same on the Pioneer-like profile).
+            let derivative = match p.controller {
+                Controller::WheelPd { k_p, k_d } => k_d / k_p,
+                Controller::VwPd { k_pt, k_dt, .. } => k_dt / k_pt,
+            };
+            m.insert("derivative_s".into(), derivative);
             m.insert("quantile".into(), q);
             m.insert("binds_share".into(), share_above(&d.volts, volts));
         }

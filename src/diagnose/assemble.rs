@@ -28,11 +28,20 @@ pub const SEARCH_FIT_PERCENT: f64 = 99.5;
 /// the Khepera-like robot's window-averaged encoders 1.7–2.8 ×, other effects up to 140 ×).
 pub const NOISE_FLOOR_FACTOR: f64 = 2.0;
 
-/// Every finding's parameters as the final model has them (the later fits refit them all).
+/// Every finding's parameters as the final model has them (the later fits refit them all;
+/// a secondary parameter held when the effect was accepted and freed by a later fit,
+/// [`wheelid_core::Effect::secondary`], joins them).
 fn final_parameters(findings: &mut [Finding], cur: &Current) {
     let mut at = 6;
     for c in &cur.candidates {
         if let Some(f) = findings.iter_mut().find(|f| f.effect == c.name()) {
+            for (j, _) in c.effect().secondary(&cur.theta) {
+                let name = c.params()[j].name.to_owned();
+                if !cur.pinned.contains(&(at + j)) && !f.parameters.contains_key(&name) {
+                    f.parameters.insert(name.clone(), cur.theta[at + j]);
+                    f.std_err.insert(name, cur.std_err[at + j]);
+                }
+            }
             for (j, info) in c.params().iter().enumerate() {
                 if let Some(v) = f.parameters.get_mut(info.name) {
                     *v = cur.theta[at + j];

@@ -89,6 +89,7 @@ pub(super) fn fit_candidate(
     } = start;
     let (t_lo, t_hi) = data.span();
     let margin = 0.05 * (t_hi - t_lo);
+    let secondary = hold_secondary(&cands, &cur.theta, &mut theta, &mut pinned);
     let run = |theta: &[f64], pinned: &[usize]| fit_pinned(data, &model, theta, pinned, &bounds);
     let search = c.effect().search();
     let two = matches!(c.effect().channels(), EffectChannels::Each { .. });
@@ -176,12 +177,81 @@ pub(super) fn fit_candidate(
             (fit, full, free) = run(&th, &pinned)?;
         }
     }
+    ((fit, full, free), pinned) =
+        free_secondary(&run, &cost, (fit, full, free), pinned, &secondary);
     let mut new = current_of(&model, cands, pinned, &fit, full, &free, data)?;
     if search == Search::ChangeTime {
         // The change time's uncertainty is the width of its flat minimum.
         new.std_err[base] = time_resolution;
     }
     Ok((new, fit))
+}
+
+/// The secondary parameters ([`wheelid_core::Effect::secondary`]) of the model with
+/// `candidates` (the last one new, its parameters from `theta`'s end): the new one's, held in
+/// `theta` at their null and added to `pinned`, and those of the others still held there (an
+/// earlier fit could not free them; beside the new candidate it may: a payload's new θ1
+/// separates a clamp's derivative term from its level), each (index, start) for θ1…θ6 of
+/// `nominal`.
+fn hold_secondary(
+    candidates: &[Candidate],
+    nominal: &[f64],
+    theta: &mut [f64],
+    pinned: &mut Vec<usize>,
+) -> Vec<(usize, f64)> {
+    let mut out = Vec::new();
+    let mut offset = 6;
+    for (k, c) in candidates.iter().enumerate() {
+        let null = c.effect().null(nominal, 0.0);
+        let new = k + 1 == candidates.len();
+        for (j, start) in c.effect().secondary(nominal) {
+            let i = offset + j;
+            if new && !pinned.contains(&i) {
+                theta[i] = null[j];
+                pinned.push(i);
+                out.push((i, start));
+            } else if !new && pinned.contains(&i) {
+                out.push((i, start));
+            }
+        }
+        offset += c.params().len();
+    }
+    out
+}
+
+/// `fitted` refitted with the effect's `secondary` parameters
+/// ([`wheelid_core::Effect::secondary`]: index, start; held in `fitted` at their null) freed,
+/// from its θ and from its θ with them at their starts, the cheaper refit where it succeeds
+/// and costs less than `fitted`, with `pinned` less them; else `fitted` and `pinned` as they
+/// are.
+fn free_secondary(
+    run: &FitFrom<'_>,
+    cost: &(dyn Fn(&PinnedFit) -> f64 + Sync),
+    fitted: PinnedFit,
+    pinned: Vec<usize>,
+    secondary: &[(usize, f64)],
+) -> (PinnedFit, Vec<usize>) {
+    if secondary.is_empty() {
+        return (fitted, pinned);
+    }
+    let free: Vec<usize> = pinned
+        .iter()
+        .copied()
+        .filter(|i| secondary.iter().all(|&(j, _)| j != *i))
+        .collect();
+    let mut started = fitted.1.clone();
+    for &(i, start) in secondary {
+        started[i] = start;
+    }
+    let (from_null, from_start) = rayon::join(|| run(&fitted.1, &free), || run(&started, &free));
+    let best = [from_null, from_start]
+        .into_iter()
+        .flatten()
+        .min_by(|a, b| cost(a).total_cmp(&cost(b)));
+    match best {
+        Some(r) if cost(&r) < cost(&fitted) => (r, free),
+        _ => (fitted, pinned),
+    }
 }
 
 /// A fit from θ with the given parameters pinned, or why it failed.

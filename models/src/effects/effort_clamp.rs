@@ -19,15 +19,24 @@
 //! sees v ± dω/2); for the v/ω-PD controller (Appendix A.3) the wheel voltages are
 //! K_PT (v_ref − v) ± K_PR (ω_ref − ω), so κ = K_PR/K_PT, fitted as μ. In physical units:
 //! c = V_max r/k_P for the wheel-PD loop (V_max the amplifier's limit \[V\], r the wheel radius)
-//! and c = V_max/K_PT for the v/ω-PD loop. The derivative term's share of θ1, θ2 (which also
-//! vanishes while clamped) is taken as small.
+//! and c = V_max/K_PT for the v/ω-PD loop.
+//!
+//! The loop's derivative term δ = K_D/K_P \[s\] (`derivative_s`; k_D/k_P for the wheel loop,
+//! K_DT/K_PT for the v/ω loop) is part of θ1, θ2 (§2.2) and vanishes with the feedback while a
+//! wheel is clamped: a clamped wheel's voltage is e_i − δ × its rim's acceleration, and it
+//! accelerates θ − δ, not θ (`crate::extended`'s `wheels` module has the equations). Without it
+//! the clamp on the physics backend's Pioneer-like loop (δ = 1.5/66 s, 9 % of θ1) came out
+//! 9–10 % above V/K_PT on every seed, and where a payload then moved θ1 a drifting drive gain
+//! was named for the difference. With one θ1 the clamp c and δ trade off (the clamped
+//! acceleration is about c/(θ1 − δ)); a payload's new θ1, or forces beside the effort, tell
+//! them apart. Its null is 0 (no derivative term), where its fit starts.
 
 use wheelid_core::effect::{FitData, Probe, ProbeData, Search, Terms, abs_quantile};
 use wheelid_core::{Effect, EffectChannels, ParamInfo, Recording, Result, WheelTerms};
 
 use super::{NEVER, limit_plausible};
 
-static PARAMS: [ParamInfo; 2] = [
+static PARAMS: [ParamInfo; 3] = [
     ParamInfo {
         name: "effort_max",
         unit: "m/s",
@@ -38,10 +47,22 @@ static PARAMS: [ParamInfo; 2] = [
         unit: "-",
         description: "ω effort's share in each wheel, relative to the wheel-PD loop's d/2",
     },
+    ParamInfo {
+        name: "derivative_s",
+        unit: "s",
+        description: "the speed loop's derivative gain over its proportional gain, K_D/K_P",
+    },
 ];
 
-/// Per-wheel effort clamp c [m/s] and mixing μ (`Terms::clamp`); null: a level no effort
-/// reaches and μ = 1; needs the wheel track.
+/// Share of min(θ1, θ2) from which the derivative term's fit also starts
+/// ([`wheelid_core::Effect::secondary`]). Freed from 0 alone (its bound), it hardly moved on
+/// the physics backend's tuning pairs (0.0003–0.0006 s for the Pioneer-like 0.0227 s beside a
+/// payload, whose gain drift then stayed); from 0.1 θ (about 0.025 s there) it came to
+/// 0.019–0.023 s.
+const DERIVATIVE_START: f64 = 0.1;
+
+/// Per-wheel effort clamp c [m/s], mixing μ and the loop's derivative term δ \[s\]
+/// (`Terms::wheels`); null: a level no effort reaches, μ = 1, δ = 0; needs the wheel track.
 #[derive(Debug, Clone, Copy)]
 pub struct EffortClamp;
 
@@ -72,10 +93,15 @@ impl Effect for EffortClamp {
         EffectChannels::Both
     }
     fn null(&self, _theta: &[f64], _t_mid: f64) -> Vec<f64> {
-        vec![NEVER, 1.0]
+        vec![NEVER, 1.0, 0.0]
     }
     fn bounds(&self, _t_range: (f64, f64)) -> Vec<(f64, f64)> {
-        vec![(1e-6, f64::INFINITY), (0.05, 20.0)]
+        vec![(1e-6, f64::INFINITY), (0.05, 20.0), (0.0, 10.0)]
+    }
+    /// The derivative term trades with the level on one θ1 (module docs); freed from 0 and
+    /// from `DERIVATIVE_START` (0.1) of min(θ1, θ2).
+    fn secondary(&self, theta: &[f64]) -> Vec<(usize, f64)> {
+        vec![(2, DERIVATIVE_START * theta[0].min(theta[1]))]
     }
     fn search(&self) -> Search {
         Search::Limit { rate: false }
@@ -127,6 +153,18 @@ impl Effect for EffortClamp {
                 Err(format!("mix = {x:.3} is no drive's (0.1…10)"))
             };
         }
+        if j == 2 {
+            // Not tested against 0: a loop may have no derivative term.
+            let most = 0.5 * fit.theta[0].min(fit.theta[1]);
+            return if x <= most {
+                Ok(())
+            } else {
+                Err(format!(
+                    "derivative_s = {x:.4} s is more than half of θ1, θ2 ({:.4} s)",
+                    2.0 * most
+                ))
+            };
+        }
         let half = 0.5 * fit.track.unwrap_or(0.0) * fit.theta[fit.base + 1];
         limit_plausible(&PARAMS[0], x, se, over(fit.recordings, half, x))
     }
@@ -134,6 +172,7 @@ impl Effect for EffortClamp {
         let w = terms.wheels.get_or_insert_with(WheelTerms::default);
         w.effort_max = p[0].abs();
         w.mix = p[1];
+        w.derivative = p[2];
         Ok(())
     }
 }

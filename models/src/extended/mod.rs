@@ -42,6 +42,7 @@ use crate::{dynamics, regressor};
 mod differences;
 mod found;
 mod traction;
+mod wheels;
 
 pub use found::Found;
 
@@ -274,59 +275,70 @@ impl Field {
     ) -> Local {
         let [kv, kw] = self.slip;
         let u = c.u;
-        // The drive gain's extra loop feedback, −(g − 1)(v, ω) (module docs).
-        let lost = c.g - 1.0;
-        let mut fv = u[0] + th[2] * w * w - (th[3] + lost) * v - th[3] * kv * v * w.abs();
-        let mut fw = u[1] - th[4] * v * w - (th[5] + lost) * w - th[5] * kw * v.abs() * w;
-        let (mut dry_v, mut dry_w) = (0.0, 0.0);
+        // The loop's efforts E = u − g (v, ω) and every other force O (module docs).
+        let e = [u[0] - c.g * v, u[1] - c.g * w];
+        let sign = |x: f64| if x == 0.0 { 0.0 } else { x.signum() };
+        let mut others = wheels::Others {
+            o: [
+                th[2] * w * w - (th[3] - 1.0) * v - th[3] * kv * v * w.abs(),
+                -th[4] * v * w - (th[5] - 1.0) * w - th[5] * kw * v.abs() * w,
+            ],
+            jac: [
+                [
+                    -(th[3] - 1.0) - th[3] * kv * w.abs(),
+                    2.0 * th[2] * w - th[3] * kv * v * sign(w),
+                ],
+                [
+                    -th[4] * w - th[5] * kw * sign(v) * w,
+                    -th[4] * v - (th[5] - 1.0) - th[5] * kw * v.abs(),
+                ],
+            ],
+            // ∂O/∂θ3…θ6.
+            theta: [
+                [w * w, 0.0],
+                [-v * (1.0 + kv * w.abs()), 0.0],
+                [0.0, -v * w],
+                [0.0, -w * (1.0 + kw * v.abs())],
+            ],
+        };
         if self.dry {
             let (tv, tw) = (
                 dynamics::tanh(v / FRICTION_EPS[0]),
                 dynamics::tanh(w / FRICTION_EPS[1]),
             );
-            fv -= self.coulomb[0] * tv;
-            fw -= self.coulomb[1] * tw;
-            dry_v = self.coulomb[0] * (1.0 - tv * tv) / FRICTION_EPS[0];
-            dry_w = self.coulomb[1] * (1.0 - tw * tw) / FRICTION_EPS[1];
+            others.o[0] -= self.coulomb[0] * tv;
+            others.o[1] -= self.coulomb[1] * tw;
+            others.jac[0][0] -= self.coulomb[0] * (1.0 - tv * tv) / FRICTION_EPS[0];
+            others.jac[1][1] -= self.coulomb[1] * (1.0 - tw * tw) / FRICTION_EPS[1];
         }
-        let mut jf = [[0.0; 2]; 2];
-        // ∂(clamped − unclamped effort)/∂u, for the command's sensitivities.
-        let mut ju = [[0.0; 2]; 2];
-        if let Some(wt) = self.wheels {
-            let e = [u[0] - c.g * v, u[1] - c.g * w];
-            let (df, dj) = wheel_correction(&wt, c.g, e);
-            fv += df[0];
-            fw += df[1];
+        for (effect, p) in &self.forces {
+            let force = effect.force(p, v, w, self.track);
+            for r in 0..2 {
+                others.o[r] += force.f[r];
+                others.jac[r][0] += force.jacobian[r][0];
+                others.jac[r][1] += force.jacobian[r][1];
+            }
+        }
+        let wheels = self
+            .wheels
+            .map(|wt| wheels::wheel_force(&wt, c.g, e, &others, [th[0], th[1]]));
+        let (d, dx, ju, dth) = wheels.map_or(([0.0; 2], [[0.0; 2]; 2], [[0.0; 2]; 2], None), |w| {
+            (w.d, w.dx, w.du, w.dth)
+        });
+        let mut a = [[0.0; 2]; 2];
+        if jac {
             for r in 0..2 {
                 for k in 0..2 {
-                    jf[r][k] += dj[r][k];
-                    ju[r][k] = -dj[r][k] / c.g;
+                    let own = if r == k { -c.g } else { 0.0 };
+                    a[r][k] = (own + others.jac[r][k] + dx[r][k]) * inv[r];
                 }
             }
         }
-        for (e, p) in &self.forces {
-            let force = e.force(p, v, w, self.track);
-            fv += force.f[0];
-            fw += force.f[1];
-            for (row, d) in jf.iter_mut().zip(force.jacobian) {
-                row[0] += d[0];
-                row[1] += d[1];
-            }
-        }
-        let mut a = [[0.0; 2]; 2];
-        if jac {
-            let sign = |x: f64| if x == 0.0 { 0.0 } else { x.signum() };
-            a[0][0] = (-th[3] * (1.0 + kv * w.abs()) - lost - dry_v + jf[0][0]) * inv[0];
-            a[0][1] = (2.0 * th[2] * w - th[3] * kv * v * sign(w) + jf[0][1]) * inv[0];
-            a[1][0] = (-th[4] * w - th[5] * kw * sign(v) * w + jf[1][0]) * inv[1];
-            a[1][1] =
-                (-th[4] * v - th[5] * (1.0 + kw * v.abs()) - lost - dry_w + jf[1][1]) * inv[1];
-        }
-        let mut f = [fv * inv[0], fw * inv[1]];
+        let mut f = [0, 1].map(|r| (e[r] + others.o[r] + d[r]) * inv[r]);
         if let Some(scale) = self.right_row {
             self.scale_right_row(scale, &mut f, &mut a);
         }
-        Local { f, a, ju }
+        Local { f, a, ju, dth }
     }
 
     /// ż for the state z = (v, ω, ∂v/∂p, ∂ω/∂p) under command `c`: θ with the reciprocals
@@ -343,7 +355,7 @@ impl Field {
     ) -> [f64; N] {
         let [kv, kw] = self.slip;
         let (v, w) = (z[0], z[1]);
-        let Local { f, a, ju } = self.local(th, inv, (v, w), c, M == NS);
+        let Local { f, a, ju, dth } = self.local(th, inv, (v, w), c, M == NS);
         let mut out = [0.0; N];
         out[0] = f[0];
         out[1] = f[1];
@@ -368,6 +380,14 @@ impl Field {
             out[2 + 3] -= v * (1.0 + kv * w.abs()) * inv[0];
             out[2 + M + 4] -= held * v * w * inv[1];
             out[2 + M + 5] -= w * (1.0 + kw * v.abs()) * inv[1];
+            if let Some(dth) = dth {
+                for k in 0..6 {
+                    // θ4, θ6 stay in force after a payload change.
+                    let h = if k == 3 || k == 5 { 1.0 } else { held };
+                    out[2 + k] += h * dth[0][k] * inv[0];
+                    out[2 + M + k] += h * dth[1][k] * inv[1];
+                }
+            }
         }
         out
     }
@@ -379,40 +399,9 @@ struct Local {
     f: [f64; 2],
     a: [[f64; 2]; 2],
     ju: [[f64; 2]; 2],
-}
-
-/// The per-wheel efforts' correction of eq. 2.19's efforts E = (E_v, E_ω)
-/// ([`wheelid_core::WheelTerms`] `wt`, its `mix` as κ \[m\]): Δ = (Ē_v − E_v, Ē_ω − E_ω)
-/// with the wheels' efforts E_v ± κ E_ω, the right one × `right_gain`, clamped to
-/// ±`effort_max`, the right one then × `right_lever`, and ∂Δ/∂(v, ω) for drive gain `g`
-/// (E = u − g (v, ω)).
-#[inline]
-fn wheel_correction(
-    wt: &wheelid_core::WheelTerms,
-    g: f64,
-    e: [f64; 2],
-) -> ([f64; 2], [[f64; 2]; 2]) {
-    let (gain, cl, kappa, lever) = (wt.right_gain, wt.effort_max, wt.mix, wt.right_lever);
-    let wheels = [gain * (e[0] + kappa * e[1]), e[0] - kappa * e[1]];
-    let clamped = [lever * wheels[0].clamp(-cl, cl), wheels[1].clamp(-cl, cl)];
-    let ev = 0.5 * (clamped[0] + clamped[1]);
-    let ew = (clamped[0] - clamped[1]) / (2.0 * kappa);
-    // Each wheel's slope on its own error: its gain where it follows, 0 where it is clamped.
-    let [fr, fl] = [0, 1].map(|i| {
-        if wheels[i].abs() < cl {
-            [gain * lever, 1.0][i]
-        } else {
-            0.0
-        }
-    });
-    let (sum, diff) = (0.5 * (fr + fl), 0.5 * (fr - fl));
-    (
-        [ev - e[0], ew - e[1]],
-        [
-            [g * (1.0 - sum), -g * kappa * diff],
-            [-g * diff / kappa, g * (1.0 - sum)],
-        ],
-    )
+    /// ∂(the wheels' correction)/∂θ1…θ6 (rows v̇, ω̇ before θ1, θ2 divide), where a wheel is
+    /// clamped with a derivative term ([`wheels`]).
+    dth: Option<[[f64; 6]; 2]>,
 }
 
 /// Sensitivity columns integrated analytically: θ1…θ6, v0, ω0.

@@ -72,45 +72,53 @@ fn saturation_and_rate_limit_match_their_closed_forms() {
     }
 }
 
-/// A step on both wheels that clamps them: θ1 v̇ = c − (θ4 − 1) v while u − v > c, i.e.
-/// v = c/(θ4 − 1)(1 − e^{−(θ4−1)t/θ1}) up to v = u − c at t1, then the plain lag towards
-/// u/θ4; a turn on the spot clamps both wheels opposite: θ2 ω̇ = c/κ − (θ6 − 1) ω.
+/// A step on both wheels that clamps them, with the loop's derivative term δ = 0 and 0.05 s
+/// (`derivative_s`, gone while clamped): (θ1 − δ) v̇ = c − (θ4 − 1) v while the wheels'
+/// voltage u − v − δ v̇ exceeds c, i.e. v = c/(θ4 − 1)(1 − e^{−(θ4−1)t/(θ1−δ)}) up to v1 where
+/// u − v1 − δ (c − (θ4 − 1) v1)/(θ1 − δ) = c, at t1, then the plain lag towards u/θ4 (its
+/// θ1 whole: the derivative term is part of it); a turn on the spot clamps both wheels
+/// opposite: (θ2 − δ) ω̇ = c/κ − (θ6 − 1) ω.
 #[test]
 fn effort_clamp_matches_its_closed_form() {
     let (c, track, mu) = (0.2, 0.3, 1.5);
     let kappa = mu * track / 2.0;
     let e = Extended::new(&[Candidate::EFFORT_CLAMP], track).expect("model");
-    let mut th = THETA.to_vec();
-    th.extend([c, mu]);
-    let (u, a4) = (1.0, THETA[3] - 1.0);
-    let rec = recording(false, 101, |_| (u, 0.0));
-    let [v, _] = <[Vec<f64>; 2]>::try_from(e.simulate(&th, &rec, &[0.0, 0.0]).expect("sim"))
-        .expect("two channels");
-    let clamped = |t: f64| c / a4 * (1.0 - (-a4 * t / THETA[0]).exp());
-    let t1 = -THETA[0] / a4 * (1.0 - a4 * (u - c) / c).ln();
-    let tau = THETA[0] / THETA[3];
-    for (k, vk) in v.iter().enumerate() {
-        let t = rec.t[k];
-        let want = if t <= t1 {
-            clamped(t)
-        } else {
-            u / THETA[3] + (u - c - u / THETA[3]) * (-(t - t1) / tau).exp()
-        };
-        approx::assert_abs_diff_eq!(*vk, want, epsilon = 2e-4);
-    }
-    // Spin: ω_ref = 6 rad/s, the wheels' efforts ±κ (6 − ω) stay above c over the 1 s.
-    // (θ3 = θ5 = 0: no coupling through v.)
-    let rec = recording(false, 11, |_| (0.0, 6.0));
-    th[2] = 0.0;
-    th[4] = 0.0;
-    let [_, w] = <[Vec<f64>; 2]>::try_from(e.simulate(&th, &rec, &[0.0, 0.0]).expect("sim"))
-        .expect("two channels");
-    let a6 = THETA[5] - 1.0;
-    for (k, wk) in w.iter().enumerate() {
-        let t = rec.t[k];
-        let want = c / kappa / a6 * (1.0 - (-a6 * t / THETA[1]).exp());
-        assert!(kappa * (6.0 - want) > c);
-        approx::assert_abs_diff_eq!(*wk, want, epsilon = 1e-8);
+    for delta in [0.0, 0.05] {
+        let mut th = THETA.to_vec();
+        th.extend([c, mu, delta]);
+        let (u, a4) = (1.0, THETA[3] - 1.0);
+        let rec = recording(false, 101, |_| (u, 0.0));
+        let [v, _] = <[Vec<f64>; 2]>::try_from(e.simulate(&th, &rec, &[0.0, 0.0]).expect("sim"))
+            .expect("two channels");
+        let inertia = THETA[0] - delta;
+        let clamped = |t: f64| c / a4 * (1.0 - (-a4 * t / inertia).exp());
+        let v1 = (u - c - delta * c / inertia) / (1.0 - delta * a4 / inertia);
+        let t1 = -inertia / a4 * (1.0 - a4 * v1 / c).ln();
+        let tau = THETA[0] / THETA[3];
+        for (k, vk) in v.iter().enumerate() {
+            let t = rec.t[k];
+            let want = if t <= t1 {
+                clamped(t)
+            } else {
+                u / THETA[3] + (v1 - u / THETA[3]) * (-(t - t1) / tau).exp()
+            };
+            approx::assert_abs_diff_eq!(*vk, want, epsilon = 2e-4);
+        }
+        // Spin: ω_ref = 6 rad/s, the wheels' voltages ±κ (6 − ω − δ ω̇) stay above c over the
+        // 1 s. (θ3 = θ5 = 0: no coupling through v.)
+        let rec = recording(false, 11, |_| (0.0, 6.0));
+        th[2] = 0.0;
+        th[4] = 0.0;
+        let [_, w] = <[Vec<f64>; 2]>::try_from(e.simulate(&th, &rec, &[0.0, 0.0]).expect("sim"))
+            .expect("two channels");
+        let (a6, inertia) = (THETA[5] - 1.0, THETA[1] - delta);
+        for (k, wk) in w.iter().enumerate() {
+            let t = rec.t[k];
+            let want = c / kappa / a6 * (1.0 - (-a6 * t / inertia).exp());
+            let accel = (c / kappa - a6 * want) / inertia;
+            assert!(kappa * (6.0 - want - delta * accel) > c);
+            approx::assert_abs_diff_eq!(*wk, want, epsilon = 1e-8);
+        }
     }
 }
 
@@ -132,7 +140,7 @@ fn a_stiff_effort_clamp_matches_its_closed_form_in_window_averages() {
     assert!(dynamics::plan(&theta, 0.1).exponential());
     let e = Extended::new(&[Candidate::EFFORT_CLAMP], track).expect("model");
     let mut th = theta.to_vec();
-    th.extend([c, mu]);
+    th.extend([c, mu, 0.0]);
     let rec = recording(true, 4, |_| (u, 0.0));
     let [v, _] = <[Vec<f64>; 2]>::try_from(e.simulate(&th, &rec, &[0.0, 0.0]).expect("sim"))
         .expect("two channels");
@@ -200,15 +208,16 @@ fn analytic_sensitivities_match_central_differences_with_every_candidate() {
         (vec![Candidate::GAIN_DRIFT], vec![0.01]),
         (vec![Candidate::SLIP], vec![0.05, 0.1]),
         (vec![Candidate::WHEEL_FRICTION], vec![0.03]),
-        (vec![Candidate::EFFORT_CLAMP], vec![0.12, 1.3]),
+        (vec![Candidate::EFFORT_CLAMP], vec![0.12, 1.3, 0.0]),
+        (vec![Candidate::EFFORT_CLAMP], vec![0.12, 1.3, 0.03]),
         (vec![Candidate::AMP_ASYMMETRY], vec![0.9]),
         (
             vec![Candidate::AMP_ASYMMETRY, Candidate::EFFORT_CLAMP],
-            vec![1.1, 0.12, 1.3],
+            vec![1.1, 0.12, 1.3, 0.03],
         ),
         (
             vec![Candidate::GAIN_DRIFT, Candidate::EFFORT_CLAMP],
-            vec![-0.01, 0.12, 0.8],
+            vec![-0.01, 0.12, 0.8, 0.03],
         ),
         (
             vec![Candidate::COULOMB_FRICTION, Candidate::WHEEL_FRICTION],
@@ -382,17 +391,18 @@ fn a_larger_tyre_acts_after_the_clamp_and_beside_an_amplifier() {
         right_lever: 1.0,
         ..tyre
     };
-    let (dt, _) = wheel_correction(&tyre, 1.0, [1.0, 0.0]);
+    let correction = |wt: &WheelTerms, e: [f64; 2]| {
+        let f = wheels::proportional(wt, 1.0, e);
+        (f.d, f.dx)
+    };
+    let (dt, _) = correction(&tyre, [1.0, 0.0]);
     approx::assert_relative_eq!(1.0 + dt[0], 0.5 * (cl / rho + cl), epsilon = 1e-12);
     approx::assert_relative_eq!(dt[1], (cl / rho - cl) / (2.0 * kappa), epsilon = 1e-12);
-    let (da, _) = wheel_correction(&amp, 1.0, [1.0, 0.0]);
+    let (da, _) = correction(&amp, [1.0, 0.0]);
     approx::assert_relative_eq!(1.0 + da[0], cl, epsilon = 1e-12);
     approx::assert_abs_diff_eq!(da[1], 0.0, epsilon = 1e-12);
     let small = [0.01, 0.0];
-    let ((ft, jt), (fa, ja)) = (
-        wheel_correction(&tyre, 1.0, small),
-        wheel_correction(&amp, 1.0, small),
-    );
+    let ((ft, jt), (fa, ja)) = (correction(&tyre, small), correction(&amp, small));
     for r in 0..2 {
         approx::assert_relative_eq!(ft[r], fa[r], epsilon = 1e-15);
         for k in 0..2 {
