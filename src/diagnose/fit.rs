@@ -221,9 +221,9 @@ fn hold_secondary(
 
 /// `fitted` refitted with the effect's `secondary` parameters
 /// ([`wheelid_core::Effect::secondary`]: index, start; held in `fitted` at their null) freed,
-/// from its θ and from its θ with them at their starts, the cheaper refit where it succeeds
-/// and costs less than `fitted`, with `pinned` less them; else `fitted` and `pinned` as they
-/// are.
+/// from its θ and from its θ with them at their starts, the cheaper refit where it succeeds,
+/// costs less than `fitted` and has each of them ≥ 3 standard errors from its null, with
+/// `pinned` less them; else `fitted` and `pinned` as they are.
 fn free_secondary(
     run: &FitFrom<'_>,
     cost: &(dyn Fn(&PinnedFit) -> f64 + Sync),
@@ -248,8 +248,18 @@ fn free_secondary(
         .into_iter()
         .flatten()
         .min_by(|a, b| cost(a).total_cmp(&cost(b)));
+    // Kept only where the data separate them: each ≥ 3 standard errors from its held null
+    // (freed where they trade with the others, the others' errors grow without bound: a
+    // Pioneer-like clamp alone came out 0.150 ± 0.061).
+    let separated = |r: &PinnedFit| {
+        secondary.iter().all(|&(i, _)| {
+            (r.2.iter().position(|&j| j == i)).is_some_and(|a| {
+                wheelid_core::effect::z_score(r.1[i], fitted.1[i], r.0.std_err[a]) >= 3.0
+            })
+        })
+    };
     match best {
-        Some(r) if cost(&r) < cost(&fitted) => (r, free),
+        Some(r) if cost(&r) < cost(&fitted) && separated(&r) => (r, free),
         _ => (fitted, pinned),
     }
 }
