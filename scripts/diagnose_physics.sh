@@ -74,8 +74,10 @@
 # contact inside the traction stage, 050cd4a); 1047 (single, clean; pairs window_end) and
 # clean 4471-4570 once at 050cd4a, then 1047's clamp beside a larger tyre was looked at (the
 # tyre's lever after the clamp; an amplifier and a tyre multiply, a182b2f); 1048 (single,
-# clean; pairs window_end) and clean 4571-4670 once at a182b2f; the next report takes 1049..
-# and 4671.. .
+# clean; pairs window_end) and clean 4571-4670 once at a182b2f, then 1048's amplifier beside a
+# larger tyre (the tyre's far bound, 9dc55d8) and its clamp beside a payload (the clamp's
+# derivative term, c3eddf7/ec8b440) were looked at; 1049 (single, clean; pairs window_end) and
+# clean 4671-4770 once at ec8b440; the next report takes 1050.. and 4771.. .
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
