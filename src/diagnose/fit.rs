@@ -137,26 +137,8 @@ pub(super) fn fit_candidate(
         // The change time's cost is flat between samples: its minimum's middle, refitted.
         let step = (t_hi - t_lo) / (nominee.pattern.grid + 1) as f64;
         let t0 = full[base];
-        // Times whose training cost the data cannot tell from the least: the profile
-        // likelihood's 95 % interval, n_eff ln(J(t)/J_min) ≤ χ²₁(0.95), n_eff the training
-        // rows discounted for the residual's autocorrelation. (A transient reaching into the
-        // next training block makes the cost fall by 10⁻⁴ at a validation block's end: a
-        // fixed 10⁻⁶ took that for the minimum and placed a change at 75.9 s at 93.8 s.)
-        let n_eff = simulate_all(&model, &full, &data.recs, &fit.initial)
-            .map_or(1.0, |y| data.effective_samples_on(&y, &data.placing))
-            .max(1.0);
-        let tolerance = (CHI2_1_95 / n_eff).exp_m1();
-        let placing = data.placing_frame();
-        let (lo, hi) = flat_minimum(
-            (-16..=16).map(|i| (t0 + step * i as f64 / 16.0).clamp(t_lo + margin, t_hi - margin)),
-            |t| {
-                let mut th = full.clone();
-                th[base] = t;
-                simulate_all(&model, &th, &data.recs, &fit.initial)
-                    .map_or(f64::INFINITY, |y| placing.residuals(&y).norm_squared())
-            },
-            tolerance,
-        );
+        let range = (t_lo + margin, t_hi - margin);
+        let (lo, hi) = flat_change_times(data, &model, &full, &fit, base, step, range);
         time_resolution = 0.5 * (hi - lo) + step / 32.0;
         if (0.5 * (lo + hi) - t0).abs() > 1e-9 {
             let mut th = full.clone();
@@ -185,6 +167,39 @@ pub(super) fn fit_candidate(
         new.std_err[base] = time_resolution;
     }
     Ok((new, fit))
+}
+
+/// The change times (parameter `base` of `full`, the fit `fit`'s) whose training cost the data
+/// cannot tell from the least, on a grid of `step`/16 within `step` of it, clamped to `range`:
+/// the profile likelihood's 95 % interval, n_eff ln(J(t)/J_min) ≤ χ²₁(0.95), n_eff the
+/// training rows discounted for the residual's autocorrelation. (A transient reaching into the
+/// next training block makes the cost fall by 10⁻⁴ at a validation block's end: a fixed 10⁻⁶
+/// took that for the minimum and placed a change at 75.9 s at 93.8 s.)
+fn flat_change_times(
+    data: &Data,
+    model: &Extended,
+    full: &[f64],
+    fit: &OutputErrorFit,
+    base: usize,
+    step: f64,
+    range: (f64, f64),
+) -> (f64, f64) {
+    let n_eff = simulate_all(model, full, &data.recs, &fit.initial)
+        .map_or(1.0, |y| data.effective_samples_on(&y, &data.placing))
+        .max(1.0);
+    let tolerance = (CHI2_1_95 / n_eff).exp_m1();
+    let placing = data.placing_frame();
+    let t0 = full[base];
+    flat_minimum(
+        (-16..=16).map(|i| (t0 + step * i as f64 / 16.0).clamp(range.0, range.1)),
+        |t| {
+            let mut th = full.to_vec();
+            th[base] = t;
+            simulate_all(model, &th, &data.recs, &fit.initial)
+                .map_or(f64::INFINITY, |y| placing.residuals(&y).norm_squared())
+        },
+        tolerance,
+    )
 }
 
 /// The secondary parameters ([`wheelid_core::Effect::secondary`]) of the model with
