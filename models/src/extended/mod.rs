@@ -277,13 +277,19 @@ impl Field {
         let u = c.u;
         // The loop's efforts E = u − g (v, ω) and every other force O (module docs).
         let e = [u[0] - c.g * v, u[1] - c.g * w];
-        let sign = |x: f64| if x == 0.0 { 0.0 } else { x.signum() };
+        // Their derivatives only for the sensitivity pass (`jac`): the plain simulation uses
+        // none of them.
         let mut others = wheels::Others {
             o: [
                 th[2] * w * w - (th[3] - 1.0) * v - th[3] * kv * v * w.abs(),
                 -th[4] * v * w - (th[5] - 1.0) * w - th[5] * kw * v.abs() * w,
             ],
-            jac: [
+            jac: [[0.0; 2]; 2],
+            theta: [[0.0; 2]; 4],
+        };
+        if jac {
+            let sign = |x: f64| if x == 0.0 { 0.0 } else { x.signum() };
+            others.jac = [
                 [
                     -(th[3] - 1.0) - th[3] * kv * w.abs(),
                     2.0 * th[2] * w - th[3] * kv * v * sign(w),
@@ -292,15 +298,15 @@ impl Field {
                     -th[4] * w - th[5] * kw * sign(v) * w,
                     -th[4] * v - (th[5] - 1.0) - th[5] * kw * v.abs(),
                 ],
-            ],
+            ];
             // ∂O/∂θ3…θ6.
-            theta: [
+            others.theta = [
                 [w * w, 0.0],
                 [-v * (1.0 + kv * w.abs()), 0.0],
                 [0.0, -v * w],
                 [0.0, -w * (1.0 + kw * v.abs())],
-            ],
-        };
+            ];
+        }
         if self.dry {
             let (tv, tw) = (
                 dynamics::tanh(v / FRICTION_EPS[0]),
@@ -308,8 +314,10 @@ impl Field {
             );
             others.o[0] -= self.coulomb[0] * tv;
             others.o[1] -= self.coulomb[1] * tw;
-            others.jac[0][0] -= self.coulomb[0] * (1.0 - tv * tv) / FRICTION_EPS[0];
-            others.jac[1][1] -= self.coulomb[1] * (1.0 - tw * tw) / FRICTION_EPS[1];
+            if jac {
+                others.jac[0][0] -= self.coulomb[0] * (1.0 - tv * tv) / FRICTION_EPS[0];
+                others.jac[1][1] -= self.coulomb[1] * (1.0 - tw * tw) / FRICTION_EPS[1];
+            }
         }
         for (effect, p) in &self.forces {
             let force = effect.force(p, v, w, self.track);

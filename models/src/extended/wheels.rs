@@ -57,7 +57,9 @@ pub(super) struct WheelForce {
     pub dth: Option<[[f64; 6]; 2]>,
 }
 
-/// The other forces O at one state: O, ∂O/∂(v, ω) and ∂O/∂θ3…θ6 (columns, each (O_v, O_ω)).
+/// The other forces O at one state: O, ∂O/∂(v, ω) and ∂O/∂θ3…θ6 (columns, each (O_v, O_ω));
+/// the derivatives are zeros where the caller needs none (a plain simulation), and so are the
+/// derivatives of the [`WheelForce`] made from them.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(super) struct Others {
     pub o: [f64; 2],
