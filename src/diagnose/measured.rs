@@ -23,6 +23,10 @@
 //! floor's limit sooner, which its model did not know. Those were faults of composition: the
 //! tyre's lever is now applied after the clamp and at the floor's contact, and an amplifier
 //! beside it multiplies its effort factor instead of replacing it (050cd4a, a182b2f).
+//!
+//! Where the dynamics push the measured effect to an end of its bounds, it is held at the
+//! measured value instead ([`hold_at_measurement`]): at that end it stood for an effect of its
+//! quantity beside it, which the search then meets in what the hold leaves.
 
 use super::search::Outcome;
 use super::*;
@@ -71,6 +75,9 @@ pub(super) fn settle(data: &Data, mut cur: Current, out: &mut Outcome) -> (Curre
         // Held from here on: what the encoders cannot tell from it (a weak amplifier) is
         // then fitted beside it, not traded against it along their common valley.
         if let Some(at) = params_of(&cur, *c) {
+            if at_bound(&cur.theta[at.clone()], m) {
+                hold_at_measurement(data, &mut cur, *c, at.clone(), m, out);
+            }
             cur.pinned.extend(at);
         }
         any = true;
@@ -84,6 +91,93 @@ fn within(cur: &Current, c: Candidate, m: &wheelid_core::Measurement) -> bool {
     params_of(cur, c).is_some_and(|at| {
         (cur.theta[at].iter().zip(&m.bounds)).all(|(x, (lo, hi))| (*lo..=*hi).contains(x))
     })
+}
+
+/// Whether fitted values `x` of a measured candidate sit at an end of its measurement `m`'s
+/// bounds (within [`AT_BOUND`] of their width).
+fn at_bound(x: &[f64], m: &wheelid_core::Measurement) -> bool {
+    x.iter().zip(&m.bounds).any(|(x, (lo, hi))| {
+        let tol = AT_BOUND * (hi - lo).abs();
+        (x - lo).abs() <= tol || (x - hi).abs() <= tol
+    })
+}
+
+/// Share of a measurement's bounds within which a fitted value counts as at their end
+/// ([`at_bound`]).
+const AT_BOUND: f64 = 1e-3;
+
+/// A measured candidate `c` (parameters at `at` in `cur`'s θ) that the dynamics pushed to an
+/// end of its measurement `m`'s bounds is held at the measured values and the rest of the
+/// model refitted; its finding in `out` takes those values and the measurement's standard
+/// errors. At the end of its bounds it stood for another effect of its quantity beside it:
+/// on the physics backend's tuning pairs every larger tyre fitted beside a weak or strong
+/// amplifier sat there (0.67 or 1.20 of its true departure from 1, the amplifier 17–42 % off),
+/// and no tyre beside any other effect did (0.80–1.04). Where the refit fails, `cur` is kept.
+fn hold_at_measurement(
+    data: &Data,
+    cur: &mut Current,
+    c: Candidate,
+    at: std::ops::Range<usize>,
+    m: &wheelid_core::Measurement,
+    out: &mut Outcome,
+) {
+    let mut theta = cur.theta.clone();
+    let pushed: Vec<f64> = theta[at.clone()].to_vec();
+    for (x, (v, (lo, hi))) in theta[at.clone()]
+        .iter_mut()
+        .zip(m.values.iter().zip(&m.bounds))
+    {
+        *x = v.clamp(*lo, *hi);
+    }
+    let mut pinned = cur.pinned.clone();
+    pinned.extend(at.clone());
+    let (t_lo, t_hi) = data.span();
+    let margin = 0.05 * (t_hi - t_lo);
+    let bounds = model_bounds(&cur.candidates, (t_lo + margin, t_hi - margin));
+    let model = data.model(&cur.candidates);
+    let Ok(mut new) =
+        fit_pinned(data, &model, &theta, &pinned, &bounds).and_then(|(fit, full, free)| {
+            current_of(
+                &model,
+                cur.candidates.clone(),
+                pinned,
+                &fit,
+                full,
+                &free,
+                data,
+            )
+        })
+    else {
+        return;
+    };
+    for (j, se) in m.std_err.iter().enumerate() {
+        new.std_err[at.start + j] = *se;
+    }
+    let judged = data.judged(&[cur, &new]);
+    let (after, _) = data.validate_on(&new.sim, &judged);
+    if let Some(f) = out.findings.iter_mut().find(|f| f.effect == c.name()) {
+        for (j, p) in c.params().iter().enumerate() {
+            f.parameters
+                .insert(p.name.to_owned(), new.theta[at.start + j]);
+            f.std_err
+                .insert(p.name.to_owned(), new.std_err[at.start + j]);
+        }
+        f.evidence = format!(
+            "{}; held at the measured value (the dynamics pushed it to its bound, {}: an effect \
+             of its quantity beside it)",
+            f.evidence,
+            pushed
+                .iter()
+                .map(|x| format!("{x:.4}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+        f.fit_percent_after = BTreeMap::from([
+            ("v".to_owned(), after.v.fit_percent),
+            ("w".to_owned(), after.w.fit_percent),
+        ]);
+    }
+    *cur = new;
 }
 
 /// Where candidate `c`'s parameters sit in the θ of the model `cur` (after θ1…θ6), if it is
