@@ -4,7 +4,8 @@
 //! diagnose`).
 //!
 //! Run: `cargo run --release --example profile_diagnose [--search-samples=N] [CASE…]` (no
-//! case: all of them; `--search-samples`: `DiagnoseSettings::search_samples`).
+//! case: all of them; `--search-samples`: `DiagnoseSettings::search_samples`); with
+//! `PROFILE_REPORT` set in the environment each case's text report follows its profile.
 
 use std::sync::Mutex;
 use std::time::Instant;
@@ -187,6 +188,9 @@ fn main() {
                         .map(|r| r.effect.as_str())
                         .collect::<Vec<_>>()
                 );
+                if std::env::var_os("PROFILE_REPORT").is_some() {
+                    println!("{}", wheelid::report::diagnosis_text(&d));
+                }
             }
             Err(e) => println!("  error: {e}"),
         }

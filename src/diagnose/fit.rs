@@ -159,8 +159,10 @@ pub(super) fn fit_candidate(
             (fit, full, free) = run(&th, &pinned)?;
         }
     }
-    ((fit, full, free), pinned) =
-        free_secondary(&run, &cost, (fit, full, free), pinned, &secondary);
+    if !secondary.is_empty() && explains(data, cur, &model, &full, &fit) {
+        ((fit, full, free), pinned) =
+            free_secondary(&run, &cost, (fit, full, free), pinned, &secondary);
+    }
     let mut new = current_of(&model, cands, pinned, &fit, full, &free, data)?;
     if search == Search::ChangeTime {
         // The change time's uncertainty is the width of its flat minimum.
@@ -232,6 +234,32 @@ fn hold_secondary(
         offset += c.params().len();
     }
     out
+}
+
+/// Share of the validation cost a candidate's fit with the secondary parameters held must take
+/// off the model before it for them to be freed ([`explains`]): the least drop any acceptance
+/// asks (`accept::STRONG_DROP_FLOOR` of the default 5 %).
+const SECONDARY_MIN_DROP: f64 = super::accept::STRONG_DROP_FLOOR * 0.05;
+
+/// Whether the fit `full` (its `fit`) of `model` takes at least [`SECONDARY_MIN_DROP`] off
+/// the validation cost of the model before it, `cur`. A secondary parameter refines what its
+/// effect explains: beside a candidate that the acceptance will turn down whatever they add
+/// (a voltage clamp beside a rate limit and a wheel asymmetry in `benches/diagnose.rs`, its
+/// validation fit of v falling), freeing them is two fits more.
+fn explains(
+    data: &Data,
+    cur: &Current,
+    model: &Extended,
+    full: &[f64],
+    fit: &OutputErrorFit,
+) -> bool {
+    let Some(y) = simulate_all(model, full, &data.recs, &fit.initial) else {
+        return false;
+    };
+    let judged = data.judged(&[cur]);
+    let (_, before) = data.validate_on(&cur.sim, &judged);
+    let (_, after) = data.validate_on(&y, &judged);
+    after <= (1.0 - SECONDARY_MIN_DROP) * before
 }
 
 /// `fitted` refitted with the effect's `secondary` parameters
