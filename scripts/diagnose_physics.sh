@@ -77,7 +77,10 @@
 # clean; pairs window_end) and clean 4571-4670 once at a182b2f, then 1048's amplifier beside a
 # larger tyre (the tyre's far bound, 9dc55d8) and its clamp beside a payload (the clamp's
 # derivative term, c3eddf7/ec8b440) were looked at; 1049 (single, clean; pairs window_end) and
-# clean 4671-4770 once at ec8b440; the next report takes 1050.. and 4771.. .
+# clean 4671-4770 once at ec8b440, then 1049's amplifier beside a larger tyre (the tyre held at
+# the heading, c6a5972) was looked at; 1050 (single, clean; pairs window_end) and clean
+# 4771-4870 once at 3d258c1, then 1050's larger tyre on the floor was looked at (held only where
+# the heading is sure, HOLD_Z); the next report takes 1051.. and 4871.. .
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
