@@ -80,7 +80,9 @@
 # clean 4671-4770 once at ec8b440, then 1049's amplifier beside a larger tyre (the tyre held at
 # the heading, c6a5972) was looked at; 1050 (single, clean; pairs window_end) and clean
 # 4771-4870 once at 3d258c1, then 1050's larger tyre on the floor was looked at (held only where
-# the heading is sure, HOLD_Z); the next report takes 1051.. and 4871.. .
+# the heading is sure, HOLD_Z, c3d8f9d); 1051 (single, clean; pairs window_end) once at
+# c3d8f9d (clean seeds not rerun: the change acts only on a measured tyre); the next report
+# takes 1052.. and 4871.. .
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
