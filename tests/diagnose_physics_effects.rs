@@ -530,6 +530,11 @@ fn a_measured_tyre_held_at_its_bound_is_named_beside_a_strong_amplifier() {
         .and_then(|f| f.std_err.get("right_radius").copied())
         .expect("a standard error");
     assert!(tyre > 1.01 && tyre_se > 0.0, "{tyre} ± {tyre_se}");
+    let heading = d.heading.as_ref().expect("the heading shows the tyre");
+    assert!(
+        (tyre - heading.ratio).abs() < 1e-9,
+        "right_radius {tyre} vs {heading:?}"
+    );
     let gain = finding_param(&d, "amp_asymmetry", "right_gain");
     println!("right_gain {gain:.4} for {amp:.4}, right_radius {tyre:.4}");
     assert!(

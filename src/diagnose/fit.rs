@@ -527,12 +527,23 @@ pub(super) fn remove_candidate(
         .filter(|&&i| i < offset || i >= offset + len)
         .map(|&i| if i >= offset { i - len } else { i })
         .collect();
+    refit(data, cands, &theta, pinned)
+}
+
+/// The model with `candidates` fitted on the training blocks from `theta`, the `pinned`
+/// parameters held, within the candidates' own bounds (a change time 5 % inside the span).
+pub(super) fn refit(
+    data: &Data,
+    candidates: Vec<Candidate>,
+    theta: &[f64],
+    pinned: Vec<usize>,
+) -> std::result::Result<Current, String> {
     let (t_lo, t_hi) = data.span();
     let margin = 0.05 * (t_hi - t_lo);
-    let bounds = model_bounds(&cands, (t_lo + margin, t_hi - margin));
-    let model = data.model(&cands);
-    let (fit, full, free) = fit_pinned(data, &model, &theta, &pinned, &bounds)?;
-    current_of(&model, cands, pinned, &fit, full, &free, data)
+    let bounds = model_bounds(&candidates, (t_lo + margin, t_hi - margin));
+    let model = data.model(&candidates);
+    let (fit, full, free) = fit_pinned(data, &model, theta, &pinned, &bounds)?;
+    current_of(&model, candidates, pinned, &fit, full, &free, data)
 }
 
 #[cfg(test)]

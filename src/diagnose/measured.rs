@@ -76,7 +76,7 @@ pub(super) fn settle(data: &Data, mut cur: Current, out: &mut Outcome) -> (Curre
         // Held from here on: what the encoders cannot tell from it (a weak amplifier) is
         // then fitted beside it, not traded against it along their common valley.
         if let Some(at) = params_of(&cur, *c) {
-            if at_bound(&cur.theta[at.clone()], m) {
+            if overruled_at_bound(&cur.theta[at.clone()], m) {
                 hold_at_measurement(data, &mut cur, *c, at.clone(), m, out);
             }
             cur.pinned.extend(at);
@@ -100,7 +100,7 @@ fn within(cur: &Current, c: Candidate, m: &wheelid_core::Measurement) -> bool {
 /// the dynamics. A heading that slip on a slippery floor blurs (hold-out seed 1050: ρ̂ =
 /// 1.0640 ± 0.0149 for a true 1.0255, the dynamics at the near end, 1.0426, 1.4 standard
 /// errors from it) does not.
-fn at_bound(x: &[f64], m: &wheelid_core::Measurement) -> bool {
+fn overruled_at_bound(x: &[f64], m: &wheelid_core::Measurement) -> bool {
     let ends = x.iter().zip(&m.bounds).zip(m.values.iter().zip(&m.std_err));
     ends.into_iter().any(|((x, (lo, hi)), (v, se))| {
         let tol = AT_BOUND * (hi - lo).abs();
@@ -110,20 +110,21 @@ fn at_bound(x: &[f64], m: &wheelid_core::Measurement) -> bool {
 }
 
 /// Standard errors of the measurement by which an end of its bounds must lie from the measured
-/// value for a fit pushed there to be held at the measurement ([`at_bound`]).
+/// value for a fit pushed there to be held at the measurement ([`overruled_at_bound`]).
 const HOLD_Z: f64 = 3.0;
 
 /// Share of a measurement's bounds within which a fitted value counts as at their end
-/// ([`at_bound`]).
+/// ([`overruled_at_bound`]).
 const AT_BOUND: f64 = 1e-3;
 
 /// A measured candidate `c` (parameters at `at` in `cur`'s θ) that the dynamics pushed to an
-/// end of its measurement `m`'s bounds ([`at_bound`]) is held at the measured values and the
-/// rest of the model refitted; its finding in `out` takes those values and the measurement's standard
-/// errors. At the end of its bounds it stood for another effect of its quantity beside it:
-/// on the physics backend's tuning pairs every larger tyre fitted beside a weak or strong
-/// amplifier sat there (0.67 or 1.20 of its true departure from 1, the amplifier 17–42 % off),
-/// and no tyre beside any other effect did (0.80–1.04). Where the refit fails, `cur` is kept.
+/// end of its measurement `m`'s bounds ([`overruled_at_bound`]) is held at the measured values
+/// and the rest of the model refitted; its finding in `out` takes those values and the
+/// measurement's standard errors. At the end of its bounds it stood for another effect of its
+/// quantity beside it: on the physics backend's tuning pairs every larger tyre fitted beside a
+/// weak or strong amplifier sat there (0.67 or 1.20 of its true departure from 1, the
+/// amplifier 14–42 % off), and no tyre beside any other effect did (0.80–1.04). Where the
+/// refit fails, `cur` is kept.
 fn hold_at_measurement(
     data: &Data,
     cur: &mut Current,
@@ -142,28 +143,10 @@ fn hold_at_measurement(
     }
     let mut pinned = cur.pinned.clone();
     pinned.extend(at.clone());
-    let (t_lo, t_hi) = data.span();
-    let margin = 0.05 * (t_hi - t_lo);
-    let bounds = model_bounds(&cur.candidates, (t_lo + margin, t_hi - margin));
-    let model = data.model(&cur.candidates);
-    let Ok(mut new) =
-        fit_pinned(data, &model, &theta, &pinned, &bounds).and_then(|(fit, full, free)| {
-            current_of(
-                &model,
-                cur.candidates.clone(),
-                pinned,
-                &fit,
-                full,
-                &free,
-                data,
-            )
-        })
-    else {
+    let Ok(mut new) = refit(data, cur.candidates.clone(), &theta, pinned) else {
         return;
     };
-    for (j, se) in m.std_err.iter().enumerate() {
-        new.std_err[at.start + j] = *se;
-    }
+    take_measured_std_err(&mut new, at.start, m);
     let judged = data.judged(&[cur, &new]);
     let (after, _) = data.validate_on(&new.sim, &judged);
     if let Some(f) = out.findings.iter_mut().find(|f| f.effect == c.name()) {
@@ -262,17 +245,7 @@ fn fit_measured(
     let (fit, full, free) = fit_pinned(data, &model, &theta, &cur.pinned, &bounds)?;
     let mut new = current_of(&model, cands, cur.pinned.clone(), &fit, full, &free, data)?;
     let base = cur.theta.len();
-    // Held at its measurement's bound, a parameter has no standard error of the dynamics' own
-    // (0): its uncertainty is the measurement's, not "insignificant" (a larger tyre of 1.033
-    // beside a strong amplifier, fitted at the bound's near end 1.022 with the heading at
-    // 1.0330 ± 0.0001, was refused as 1.0220 ± 0.0000 "not significant"; hold-out seed 1044).
-    for (j, se) in m.std_err.iter().enumerate() {
-        if let Some(x) = new.std_err.get_mut(base + j)
-            && (!x.is_finite() || *x <= 0.0)
-        {
-            *x = *se;
-        }
-    }
+    take_measured_std_err(&mut new, base, m);
     check_candidate(data, &new, c)?;
     let judged = data.judged(&[cur, &new]);
     let (_, before) = data.validate_on(&cur.sim, &judged);
@@ -305,6 +278,22 @@ fn fit_measured(
         validation_cost_drop_percent: -100.0 * change,
     };
     Ok((new, finding))
+}
+
+/// The measured candidate's parameters (from `base` in `new`'s θ) that have no standard
+/// error of the dynamics' own take the measurement `m`'s. Held — at its measurement's bound or
+/// value — a parameter has none (0): its uncertainty is the measurement's, not
+/// "insignificant" (a larger tyre of 1.033 beside a strong amplifier, fitted at the bound's
+/// near end 1.022 with the heading at 1.0330 ± 0.0001, was refused as 1.0220 ± 0.0000 "not
+/// significant"; hold-out seed 1044).
+fn take_measured_std_err(new: &mut Current, base: usize, m: &wheelid_core::Measurement) {
+    for (j, se) in m.std_err.iter().enumerate() {
+        if let Some(x) = new.std_err.get_mut(base + j)
+            && (!x.is_finite() || *x <= 0.0)
+        {
+            *x = *se;
+        }
+    }
 }
 
 impl Data {
@@ -340,15 +329,15 @@ mod tests {
         let sure = heading(1.0489, 0.00001);
         let far = sure.bounds[0].1;
         assert!((far - 1.05871).abs() < 1e-5, "{far}");
-        assert!(at_bound(&[far], &sure));
-        assert!(at_bound(&[sure.bounds[0].0], &sure));
-        assert!(!at_bound(&[1.0470], &sure));
+        assert!(overruled_at_bound(&[far], &sure));
+        assert!(overruled_at_bound(&[sure.bounds[0].0], &sure));
+        assert!(!overruled_at_bound(&[1.0470], &sure));
         let blurred = heading(1.0640, 0.0149);
         let near = blurred.bounds[0].0;
         assert!((near - 1.04267).abs() < 1e-5, "{near}");
-        assert!(!at_bound(&[near], &blurred));
+        assert!(!overruled_at_bound(&[near], &blurred));
         // The same end 3 standard errors off is held.
         let sharper = heading(1.0640, (1.0640 - near) / 3.0 - 1e-9);
-        assert!(at_bound(&[sharper.bounds[0].0], &sharper));
+        assert!(overruled_at_bound(&[sharper.bounds[0].0], &sharper));
     }
 }
