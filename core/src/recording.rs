@@ -466,7 +466,12 @@ impl Recording {
     }
 }
 
-/// Writes `bytes` to `path` atomically (temporary file in the same directory, then rename).
+/// Writes `bytes` to `path` atomically: to a uniquely named temporary file in the same
+/// directory (`tempfile`), synced, then renamed over `path`; on failure the temporary file is
+/// removed and `path` is left as it was. Safe for concurrent writers of the same `path`, in
+/// one process or several: each renames a complete file, the last one wins. (The temporary
+/// name was once the process id alone; two threads caching one recording renamed the same
+/// file and the second failed with "No such file or directory", hold-out seed 1052.)
 ///
 /// # Errors
 /// [`Error::Io`] naming `path`.
@@ -479,20 +484,11 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
         .parent()
         .filter(|p| !p.as_os_str().is_empty())
         .unwrap_or(Path::new("."));
-    let name = path
-        .file_name()
-        .map_or_else(|| "out".into(), |n| n.to_string_lossy().into_owned());
-    let tmp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
-    let result = (|| {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        std::fs::rename(&tmp, path)
-    })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result.map_err(io)
+    let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(io)?;
+    tmp.write_all(bytes).map_err(io)?;
+    tmp.as_file().sync_all().map_err(io)?;
+    tmp.persist(path).map_err(|e| io(e.error))?;
+    Ok(())
 }
 
 /// For each grid time, the index i with t[i] ≤ g < t[i+1] and the fraction a ∈ [0, 1).
@@ -893,6 +889,28 @@ mod tests {
         assert!(matches!(r.write_csv(&missing), Err(Error::Io { .. })));
         let ok = dir.path().join("r.csv");
         r.write_csv(&ok).expect("writes");
+        assert_eq!(std::fs::read_dir(dir.path()).expect("ls").count(), 1);
+    }
+
+    /// Eight threads writing one path at once (as a batch caching a shared clean twin does)
+    /// all succeed, leave one complete file and no temporary ones: with a temporary name per
+    /// process, all but the first rename failed with "No such file or directory".
+    #[test]
+    fn concurrent_atomic_writes_of_one_path_all_succeed() {
+        let dir = tempfile::tempdir().expect("tmp");
+        let path = dir.path().join("r.csv");
+        let texts: Vec<String> = (0..8).map(|k| format!("{k}\n").repeat(20_000)).collect();
+        std::thread::scope(|s| {
+            let handles: Vec<_> = texts
+                .iter()
+                .map(|t| s.spawn(|| write_atomic(&path, t.as_bytes())))
+                .collect();
+            for h in handles {
+                h.join().expect("joins").expect("writes");
+            }
+        });
+        let written = std::fs::read_to_string(&path).expect("reads");
+        assert!(texts.contains(&written), "a complete text of one writer");
         assert_eq!(std::fs::read_dir(dir.path()).expect("ls").count(), 1);
     }
 }
