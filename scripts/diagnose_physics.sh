@@ -81,8 +81,11 @@
 # the heading, c6a5972) was looked at; 1050 (single, clean; pairs window_end) and clean
 # 4771-4870 once at 3d258c1, then 1050's larger tyre on the floor was looked at (held only where
 # the heading is sure, HOLD_Z, c3d8f9d); 1051 (single, clean; pairs window_end) once at
-# c3d8f9d (clean seeds not rerun: the change acts only on a measured tyre); the next report
-# takes 1052.. and 4871.. .
+# c3d8f9d (clean seeds not rerun: the change acts only on a measured tyre); 1052-1054 (single,
+# clean; pairs window_end) once at 078a2dd, then 1052's dead time and clamp beside the floor
+# and 1053's clamp beside a rate limit were looked at (nothing changed for them); 1052-1056
+# (single, clean; pairs window_end) and clean 4871-4970 once at 5314091; the next report takes
+# 1057.. and 4971.. .
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
