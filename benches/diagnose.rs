@@ -23,18 +23,11 @@ use wheelid::robots::effects::{
     AccelerationLimit, CoulombFriction, Effects, GainDrift, InputDelay, PayloadChange, Slip,
     VelocitySaturation, WheelAsymmetry,
 };
-use wheelid::robots::{Excitation, RobotProfile, SimSettings, simulate_recording};
+use wheelid::robots::{RobotProfile, SimSettings, simulate_recording};
 
 fn recording(effects: Effects) -> Recording {
     let robot = RobotProfile::khepera3();
-    let exc = Excitation::random_multisine(
-        3,
-        0.25 * robot.v_max,
-        0.25 * robot.v_max,
-        0.25 * robot.w_max,
-        2.0,
-    )
-    .expect("valid multisine");
+    let exc = robot.multisine(3).expect("valid multisine");
     let s = SimSettings {
         duration_s: 600.0,
         seed: 3,

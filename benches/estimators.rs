@@ -10,18 +10,11 @@ use wheelid::core::condition::{self, ConditionSettings};
 use wheelid::core::{Conditioned, Recording};
 use wheelid::identify::{IdentifySettings, identify};
 use wheelid::models::VwPd;
-use wheelid::robots::{Excitation, RobotProfile, SimSettings, simulate_recording};
+use wheelid::robots::{RobotProfile, SimSettings, simulate_recording};
 use wheelid::solvers::{InstrumentalVariables, Ols, OutputError};
 
 fn recording(robot: &RobotProfile) -> Recording {
-    let exc = Excitation::random_multisine(
-        1,
-        0.25 * robot.v_max,
-        0.25 * robot.v_max,
-        0.25 * robot.w_max,
-        2.0,
-    )
-    .expect("valid multisine");
+    let exc = robot.multisine(1).expect("valid multisine");
     let s = SimSettings {
         duration_s: 600.0,
         ..SimSettings::default()

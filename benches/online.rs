@@ -12,18 +12,11 @@
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use wheelid::online::{OnlineForm, OnlineSettings, OnlineTheta, Split};
-use wheelid::robots::{Excitation, RobotProfile, SimSettings, simulate_recording};
+use wheelid::robots::{RobotProfile, SimSettings, simulate_recording};
 
 fn bench(c: &mut Criterion) {
     let robot = RobotProfile::khepera3();
-    let exc = Excitation::random_multisine(
-        1,
-        0.25 * robot.v_max,
-        0.25 * robot.v_max,
-        0.25 * robot.w_max,
-        2.0,
-    )
-    .expect("valid multisine");
+    let exc = robot.multisine(1).expect("valid multisine");
     let s = SimSettings {
         duration_s: 600.0,
         ..SimSettings::default()

@@ -10,19 +10,12 @@
 
 use wheelid::core::Recording;
 use wheelid::online::{OnlineForm, OnlineSettings, OnlineTheta, Split};
-use wheelid::robots::{Excitation, RobotProfile, SimSettings, simulate_recording};
+use wheelid::robots::{RobotProfile, SimSettings, simulate_recording};
 
 /// The benchmark's recording: the simulated Khepera III, 10 minutes at 50 Hz.
 fn recording() -> Recording {
     let robot = RobotProfile::khepera3();
-    let exc = Excitation::random_multisine(
-        1,
-        0.25 * robot.v_max,
-        0.25 * robot.v_max,
-        0.25 * robot.w_max,
-        2.0,
-    )
-    .expect("valid multisine");
+    let exc = robot.multisine(1).expect("valid multisine");
     let s = SimSettings {
         duration_s: 600.0,
         ..SimSettings::default()

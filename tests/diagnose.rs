@@ -34,14 +34,7 @@ impl Draw {
 /// The excitation of every case: random-phase multisines to 2 Hz around a quarter of the
 /// robot's speed (as `wheelid simulate --excitation multisine`).
 fn excitation(robot: &RobotProfile, seed: u64) -> Excitation {
-    Excitation::random_multisine(
-        seed,
-        0.25 * robot.v_max,
-        0.25 * robot.v_max,
-        0.25 * robot.w_max,
-        2.0,
-    )
-    .expect("valid multisine")
+    robot.multisine(seed).expect("valid multisine")
 }
 
 fn record(robot: &RobotProfile, seed: u64, duration_s: f64, effects: Effects) -> Recording {
@@ -496,14 +489,7 @@ fn the_excerpt_names_a_battery_sag_over_ten_minutes() {
 #[test]
 fn an_inert_rival_is_not_fitted() {
     let robot = RobotProfile::khepera3();
-    let exc = Excitation::random_multisine(
-        3,
-        0.25 * robot.v_max,
-        0.25 * robot.v_max,
-        0.25 * robot.w_max,
-        2.0,
-    )
-    .expect("valid multisine");
+    let exc = robot.multisine(3).expect("valid multisine");
     let s = SimSettings {
         duration_s: 600.0,
         seed: 3,

@@ -39,14 +39,7 @@ struct Case {
 /// multisine` uses (v_ref = v_max/4 ± v_max/4, ω_ref = 0 ± w_max/4, lines up to 2 Hz), encoder
 /// quantization and noise on.
 fn recording(robot: &RobotProfile, seed: u64, duration_s: f64) -> Recording {
-    let exc = Excitation::random_multisine(
-        seed,
-        0.25 * robot.v_max,
-        0.25 * robot.v_max,
-        0.25 * robot.w_max,
-        2.0,
-    )
-    .expect("valid multisine");
+    let exc = robot.multisine(seed).expect("valid multisine");
     simulate_recording(
         robot,
         &exc,

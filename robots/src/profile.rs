@@ -35,6 +35,25 @@ pub struct RobotProfile {
 }
 
 impl RobotProfile {
+    /// The multisine `wheelid simulate --excitation multisine` drives this robot with, and the
+    /// benchmarks, profiles and diagnosis tests on it: random-phase lines up to 2 Hz
+    /// ([`Excitation::random_multisine`], phases from `seed`), v_ref = v_max/4 ± v_max/4 (peak),
+    /// ω_ref = 0 ± ω_max/4.
+    ///
+    /// # Errors
+    /// As [`Excitation::random_multisine`] (a profile whose v_max or ω_max is not finite).
+    ///
+    /// [`Excitation::random_multisine`]: crate::excitation::Excitation::random_multisine
+    pub fn multisine(&self, seed: u64) -> wheelid_core::Result<crate::excitation::Excitation> {
+        crate::excitation::Excitation::random_multisine(
+            seed,
+            0.25 * self.v_max,
+            0.25 * self.v_max,
+            0.25 * self.w_max,
+            2.0,
+        )
+    }
+
     /// The white noise of each reported wheel speed ([`RobotProfile::wheel_noise_std`],
     /// negative read as 0), after checking the period, wheels and encoders are > 0: what the
     /// simulator's measurement model needs.

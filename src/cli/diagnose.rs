@@ -7,7 +7,7 @@ use wheelid::config::{DiagnoseConfig, read_toml_or_default};
 use wheelid::core::Columns;
 use wheelid::files::ModelFile;
 use wheelid::registry::Registry;
-use wheelid::robots::{Excitation, RobotProfile, SimSettings, simulate_recording};
+use wheelid::robots::{RobotProfile, SimSettings, simulate_recording};
 use wheelid::{core::Recording, models, report};
 
 use crate::{Bar, emit, list_plots};
@@ -126,13 +126,7 @@ pub(crate) fn run_diagnose(a: DiagnoseArgs) -> Result<()> {
 fn builtin_diagnosis_recording(seed: u64) -> Result<(Recording, String)> {
     use wheelid::robots::effects::{Effects, InputDelay, VelocitySaturation};
     let robot = RobotProfile::pioneer3dx();
-    let exc = Excitation::random_multisine(
-        seed,
-        0.25 * robot.v_max,
-        0.25 * robot.v_max,
-        0.25 * robot.w_max,
-        2.0,
-    )?;
+    let exc = robot.multisine(seed)?;
     let settings = SimSettings {
         duration_s: 300.0,
         seed,
