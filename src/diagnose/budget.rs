@@ -19,11 +19,11 @@ const RIVAL_START_FACTOR: f64 = 3.0;
 /// inert: the probe never acts (a voltage clamp above every effort the drive asks), the
 /// start is the model in hand with parameters that have no gradient. Such a rival is not
 /// fitted ([`not_fitted`]): its fit starts as a refit of the model in hand, beside an accepted
-/// candidate that explains something. On the tuning seeds' pairs (540 runs) 47 rivals started inert and none passed
-/// (37 failed as rank-deficient, 10 were refused); the rate limit + wheel asymmetry case of
-/// `benches/diagnose.rs` spent 0.25 s of its 1.04 s on one (a voltage clamp at 2.24 ± 12.0,
-/// refused at −0.1 %). The first candidate of a round is fitted whatever its start (one
-/// effort clamp with an inert start was accepted as first of its round).
+/// candidate that explains something. On the tuning seeds' pairs (540 runs) 47 rivals started
+/// inert and none passed (37 failed as rank-deficient, 10 were refused); the rate limit +
+/// wheel asymmetry case of `benches/diagnose.rs` spent 0.25 s of its 1.04 s on one (a voltage
+/// clamp at 2.24 ± 12.0, refused at −0.1 %). The first candidate of a round is fitted whatever
+/// its start (one effort clamp with an inert start was accepted as first of its round).
 const INERT_START: f64 = 1e-9;
 
 /// Why candidate `c`, whose screened start's training cost is `start` (the current model's:

@@ -101,8 +101,8 @@ fn within(cur: &Current, c: Candidate, m: &wheelid_core::Measurement) -> bool {
 /// 1.0640 ± 0.0149 for a true 1.0255, the dynamics at the near end, 1.0426, 1.4 standard
 /// errors from it) does not.
 fn overruled_at_bound(x: &[f64], m: &wheelid_core::Measurement) -> bool {
-    let ends = x.iter().zip(&m.bounds).zip(m.values.iter().zip(&m.std_err));
-    ends.into_iter().any(|((x, (lo, hi)), (v, se))| {
+    let mut ends = x.iter().zip(&m.bounds).zip(m.values.iter().zip(&m.std_err));
+    ends.any(|((x, (lo, hi)), (v, se))| {
         let tol = AT_BOUND * (hi - lo).abs();
         let at = (x - lo).abs() <= tol || (x - hi).abs() <= tol;
         at && (x - v).abs() >= HOLD_Z * se
