@@ -169,21 +169,15 @@ pub(crate) fn run_simulate(a: SimulateArgs) -> Result<()> {
         sim.measurement_noise = false;
     }
     let excitation = match a.excitation.as_deref() {
-        Some("thesis") => ExcitationConfig::for_robot(&robot),
-        Some("regression") => ExcitationConfig::ThesisRegression,
-        Some(_) => ExcitationConfig::RandomMultisine {
-            seed: sim.seed,
-            v_offset: 0.25 * robot.v_max,
-            v_amp: 0.25 * robot.v_max,
-            w_amp: 0.25 * robot.w_max,
-            f_max_hz: 2.0,
-        },
+        Some("thesis") => ExcitationConfig::for_robot(&robot).build()?,
+        Some("regression") => ExcitationConfig::ThesisRegression.build()?,
+        Some(_) => robot.multisine(sim.seed)?,
         None => cfg
             .excitation
             .clone()
-            .unwrap_or_else(|| ExcitationConfig::for_robot(&robot)),
+            .unwrap_or_else(|| ExcitationConfig::for_robot(&robot))
+            .build()?,
     };
-    let excitation = excitation.build()?;
     let rec = match &saved {
         Some((model, params)) => {
             simulate_model_recording(&robot, model, params, &excitation, &sim)?
