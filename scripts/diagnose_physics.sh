@@ -84,8 +84,10 @@
 # c3d8f9d (clean seeds not rerun: the change acts only on a measured tyre); 1052-1054 (single,
 # clean; pairs window_end) once at 078a2dd, then 1052's dead time and clamp beside the floor
 # and 1053's clamp beside a rate limit were looked at (nothing changed for them); 1052-1056
-# (single, clean; pairs window_end) and clean 4871-4970 once at 5314091; the next report takes
-# 1057.. and 4971.. .
+# (single, clean; pairs window_end) and clean 4871-4970 once at 5314091, then 1052's dead time
+# beside the floor was looked at again (a non-limit's fingerprint gone at 20 %, c7737b9);
+# 1057-1061 (single, clean; pairs window_end) and clean 4971-5070 once at c7737b9; the next
+# report takes 1062.. and 5071.. .
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
