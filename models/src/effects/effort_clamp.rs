@@ -66,8 +66,9 @@ const DERIVATIVE_START: f64 = 0.1;
 /// spin-up raises that top (the delivered effort read from the wheels' accelerations at the
 /// body's θ1, θ2): on hold-out seed 1052 the traction limit's θ put it at 0.082 m/s against the
 /// true clamp's 0.049, and the share at 0.77 %; at 1 % the clamp was never probed beside the
-/// floor. Clean runs read 2–14 % (tuning seeds), so the share is no guard against a false clamp
-/// (the fit and its acceptance are); at 0.5 % the tuning seeds name the same effects.
+/// floor. The clean runs looked at (tuning seeds 3, 1017, 1019) read 2.0–13.9 %, so the share
+/// is no guard against a false clamp (the fit and its acceptance are); at 0.5 % the tuning
+/// seeds name the same effects (test `a_clamp_is_probed_where_…`).
 const MIN_SHARE: f64 = 0.005;
 
 /// Per-wheel effort clamp c [m/s], mixing μ and the loop's derivative term δ \[s\]
@@ -183,5 +184,44 @@ impl Effect for EffortClamp {
         w.mix = p[1];
         w.derivative = p[2];
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The probe's share on a closed-form case: θ = (1, 1, 0, 1, 0, 1), so the wheels' delivered
+    /// effort is v̇ itself, a ramp 0…1 whose 99.5 % quantile is ≈ 0.995; the commanded effort
+    /// v_ref − v is 2 on `m` of 2000 samples and 0 elsewhere. At m = 14 (0.7 %, the order of
+    /// hold-out seed 1052's 0.77 % beside the floor) the clamp is probed at that level — the
+    /// former 1 % share would not probe it; at m = 8 (0.4 %) it is not.
+    #[test]
+    fn a_clamp_is_probed_where_the_command_exceeds_the_delivered_top_on_half_a_percent() {
+        let n = 2000;
+        let probe = |m: usize| {
+            let t: Vec<f64> = (0..n).map(|k| k as f64 * 0.02).collect();
+            let v_ref: Vec<f64> = (0..n).map(|k| if k < m { 2.0 } else { 0.0 }).collect();
+            let rec = Recording::new("r.csv", t, v_ref, vec![0.0; n], vec![0.0; n], vec![0.0; n])
+                .expect("valid");
+            let recordings = [rec];
+            let accel = [[(0..n).map(|k| k as f64 / n as f64).collect(), vec![0.0; n]]];
+            let theta = [1.0, 1.0, 0.0, 1.0, 0.0, 1.0];
+            EffortClamp.probe(&ProbeData {
+                recordings: &recordings,
+                accel: &accel,
+                theta: &theta,
+                simulated: None,
+                dt: 0.02,
+                track: Some(0.1),
+            })
+        };
+        let Some(Probe::Levels { levels, evidence }) = probe(14) else {
+            panic!("probed at 0.7 %");
+        };
+        assert_eq!(levels.len(), 1);
+        approx::assert_relative_eq!(levels[0].1, 0.995, max_relative = 1e-3);
+        assert!(evidence.contains("on 0.7 % of the samples"), "{evidence}");
+        assert!(probe(8).is_none(), "not probed at 0.4 %");
     }
 }
