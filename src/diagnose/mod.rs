@@ -49,7 +49,8 @@
 //!    whose screened start's training cost is within three times the first's; never a
 //!    candidate fitted by differences, which is fitted only where its start already lowers the
 //!    training cost by `min_improvement`, or at all where the model in hand leaves a channel
-//!    above the noise floor) compete on Akaike's criterion over the validation
+//!    above the noise floor; there, if nothing else is accepted, the ones skipped from a start
+//!    at most twice the cost are fitted as a last resort) compete on Akaike's criterion over the validation
 //!    blocks, n_eff ln(J₁/J₀) + 2k, n_eff discounted for the residual's lag-1
 //!    autocorrelation. A change time (`payload_change`) is placed by a scan of the training
 //!    cost; its interval is the profile likelihood's 95 % one, n_eff ln(J(t)/J_min) ≤ χ²₁.

@@ -294,29 +294,7 @@ fn first_accepted(
     let rejected = &mut out.rejected;
     let order = order(round);
     progress.add_work(order.len() as u64 + 1);
-    let starts: Vec<(usize, std::result::Result<Start, String>)> = std::thread::scope(|sc| {
-        let handles: Vec<_> = order
-            .iter()
-            .map(|&i| {
-                let n = &round.nominees[i];
-                sc.spawn(move || (i, start_candidate(data, cur, n)))
-            })
-            .collect();
-        handles.into_iter().filter_map(|h| h.join().ok()).collect()
-    });
-    let mut ready = Vec::new();
-    for (i, st) in starts {
-        let c = round.nominees[i].pattern.candidate;
-        tried.push(c);
-        match st {
-            Ok(st) => ready.push((i, st)),
-            Err(reason) => rejected.push(Rejected {
-                effect: c.name().into(),
-                reason,
-            }),
-        }
-    }
-    ready.sort_by(|a, b| a.1.cost.total_cmp(&b.1.cost));
+    let ready = screen(data, cur, round, &order, tried, rejected);
     let context = Context {
         data,
         cur,
@@ -336,6 +314,7 @@ fn first_accepted(
     let now = data.frame().residuals(&cur.sim).norm_squared();
     let misfit = above_floor(&round.fits).iter().any(|&a| a);
     let mut fits = Ahead::new(ready);
+    let mut deferred = Vec::new();
     for pos in 0..fits.len() {
         let (i, start_cost) = fits.nominee(pos);
         let c = round.nominees[i].pattern.candidate;
@@ -349,6 +328,9 @@ fn first_accepted(
         if let Some(reason) =
             budget::not_fitted(c, (start_cost, now), accepted, (misfit, p), settings)
         {
+            if budget::last_resort(c, (start_cost, now), accepted.is_some(), misfit) {
+                deferred.push((pos, rejected.len()));
+            }
             rejected.push(Rejected {
                 effect: c.name().into(),
                 reason,
@@ -389,7 +371,87 @@ fn first_accepted(
             }),
         }
     }
+    if best.is_none() {
+        best = last_resort(&context, &mut fits, &deferred, rejected, n_eff);
+    }
     best.map(|(_, x)| x)
+}
+
+/// Screens the nominees in `order` of `round` from the model in hand `cur` ([`start_candidate`],
+/// in parallel) and returns those with a start, the cheapest training cost first; every one
+/// joins `tried`, and those without a start join `rejected`.
+fn screen(
+    data: &Data,
+    cur: &Current,
+    round: &Round,
+    order: &[usize],
+    tried: &mut Vec<Candidate>,
+    rejected: &mut Vec<Rejected>,
+) -> Vec<(usize, Start)> {
+    let starts: Vec<(usize, std::result::Result<Start, String>)> = std::thread::scope(|sc| {
+        let handles: Vec<_> = order
+            .iter()
+            .map(|&i| {
+                let n = &round.nominees[i];
+                sc.spawn(move || (i, start_candidate(data, cur, n)))
+            })
+            .collect();
+        handles.into_iter().filter_map(|h| h.join().ok()).collect()
+    });
+    let mut ready = Vec::new();
+    for (i, st) in starts {
+        let c = round.nominees[i].pattern.candidate;
+        tried.push(c);
+        match st {
+            Ok(st) => ready.push((i, st)),
+            Err(reason) => rejected.push(Rejected {
+                effect: c.name().into(),
+                reason,
+            }),
+        }
+    }
+    ready.sort_by(|a, b| a.1.cost.total_cmp(&b.1.cost));
+    ready
+}
+
+/// The last resort of a round that accepted nothing while the model in hand is above the
+/// noise floor: the candidates fitted by differences that [`budget::not_fitted`] skipped for
+/// their start and [`budget::last_resort`] names (`deferred`: their place in `fits` and their
+/// refusal in `rejected`) are fitted
+/// and judged after all, and the accepted one with the lowest [`information`] score over
+/// `n_eff` effective samples is returned; each one's refusal is replaced by its verdict, or
+/// removed where it is returned. A slippery floor beside an unmodelled dead time may have no
+/// start that lowers the cost: on the Pioneer-like robot (hold-out seed 1061, a 88 ms dead
+/// time and floor μ = 0.056, after its report) the floor's start raised it, every other
+/// candidate was refused, and nothing was named; fitted, the floor is accepted and the dead
+/// time follows (0.091 s) at 99.6 / 98.9 %.
+fn last_resort(
+    context: &Context<'_>,
+    fits: &mut Ahead,
+    deferred: &[(usize, usize)],
+    rejected: &mut Vec<Rejected>,
+    n_eff: f64,
+) -> Option<(f64, Accepted)> {
+    let mut best: Option<(f64, Accepted, usize)> = None;
+    for &(pos, r) in deferred {
+        match fits.fit(context, pos, None) {
+            Ok(x) => {
+                let c = context.nominees[x.0].pattern.candidate;
+                let score = information(n_eff, x.3, free_params(c, &x.1));
+                rejected[r].reason = format!(
+                    "fitted as a last resort (information score {score:.1}), outscored by \
+                     another fitted so"
+                );
+                if best.as_ref().is_none_or(|(b, _, _)| score < *b) {
+                    best = Some((score, x, r));
+                }
+            }
+            Err(reason) => rejected[r].reason = reason,
+        }
+    }
+    let (score, x, r) = best?;
+    rejected.remove(r);
+    Some((score, x))
 }
 
 /// The screened candidates of a round in the order they are fitted, and the fits done ahead
