@@ -524,6 +524,39 @@ fn a_latency_beside_a_floor_no_start_favours_is_named_with_it() {
     assert!((delay / latency - 1.0).abs() < 0.2, "delay_s {delay}");
 }
 
+/// A command latency of 0.54 host periods (53.5 ms) beside a voltage clamp on the Pioneer-like
+/// robot, hold-out seed 1057's pair (looked at after its report): the first round's rate limit
+/// outscored the dead time on the information criterion, the dead time fitted beside it
+/// landed at 21.6 ms and was refused, and the greedy search ended at v 95.2 %, ω 92.6 % with
+/// a rate limit and the clamp, `unexplained`. Where the greedy search ends above the noise
+/// floor, the search from the first round's runner-up is tried (`search::second_path`): from
+/// the dead time the clamp follows, both within 5 %, at fits of 99.9 % and more.
+#[test]
+fn a_latency_beside_a_clamp_is_found_from_the_first_rounds_runner_up() {
+    let latency = 0.053_513_193_594_547_27;
+    let volts = 9.096_434_408_192_838;
+    let (rec, model) = pioneer_recording(1057, |s| {
+        s.effects.latency_s = Some(latency);
+        s.effects.voltage_clamp = Some(volts);
+    });
+    let (d, named) = diagnosed_named(&rec, model.as_ref());
+    let text = wheelid::report::diagnosis_text(&d);
+    assert_eq!(named, ["effort_clamp", "input_delay"], "{text}");
+    let delay = finding_param(&d, "input_delay", "delay_s");
+    assert!((delay / latency - 1.0).abs() < 0.05, "delay_s {delay}");
+    let p = PhysicalProfile::pioneer3dx();
+    let Controller::VwPd { k_pt, .. } = p.controller else {
+        panic!("a v/ω-PD profile");
+    };
+    let truth = volts / k_pt;
+    let c = finding_param(&d, "effort_clamp", "effort_max");
+    assert!((c / truth - 1.0).abs() < 0.05, "effort_max {c} vs {truth}");
+    assert!(
+        d.final_stage.channels.v.fit_percent > 99.9 && d.final_stage.channels.w.fit_percent > 99.8,
+        "{text}"
+    );
+}
+
 /// A voltage clamp beside a setpoint rate limit on the Khepera-like robot (hold-out seed
 /// 1043's magnitudes, looked at after its report: the clamp binds on 9 % of the samples) is
 /// named with it, its effort limit within 20 % of V r/k_P. Fitted within 2 % of it beside the

@@ -63,7 +63,11 @@
 //!    model (forward selection, at most [`DiagnoseSettings::max_effects`], until every channel
 //!    is fitted to [`SEARCH_FIT_PERCENT`]; effects that move one quantity the encoders see,
 //!    [`wheelid_core::Effect::quantity`], are alternatives: once one is in, the others are
-//!    not searched). An effect that a sensor other than the encoders measures
+//!    not searched). Forward selection is greedy: where its final model leaves a channel above
+//!    the noise floor, the search from the first round's runner-up (the best candidate that
+//!    passed and was outscored) is run too, and its final model replaces the greedy one where
+//!    it names other effects and explains the validation blocks better for its parameters
+//!    (Akaike's criterion). An effect that a sensor other than the encoders measures
 //!    ([`wheelid_core::Effect::measured`]: a larger tyre in a heading independent of the
 //!    encoders) is then in the model whatever the dynamics show — in place of the candidates
 //!    of its quantity, fitted within the bounds its measurement allows, held, and named with
