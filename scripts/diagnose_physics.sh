@@ -86,8 +86,11 @@
 # and 1053's clamp beside a rate limit were looked at (nothing changed for them); 1052-1056
 # (single, clean; pairs window_end) and clean 4871-4970 once at 5314091, then 1052's dead time
 # beside the floor was looked at again (a non-limit's fingerprint gone at 20 %, c7737b9);
-# 1057-1061 (single, clean; pairs window_end) and clean 4971-5070 once at c7737b9; the next
-# report takes 1062.. and 5071.. .
+# 1057-1061 (single, clean; pairs window_end) and clean 4971-5070 once at c7737b9, then 1061's
+# dead time beside the floor (a last resort, 3238b24) and 1057's dead time beside a clamp (the
+# runner-up's path, b63c762) were looked at; 1062-1066 (single, clean; pairs window_end) and
+# clean 5071-5170 once at b63c762 (1062-1063 partly run at 3238b24 first, stopped unread); the
+# next report takes 1067.. and 5171.. .
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
