@@ -470,10 +470,23 @@ fn no_amplifier_is_named_beside_a_measured_tyre_for_what_its_hold_leaves() {
 /// is now fitted whatever its start: both are named, the delay within 20 %.
 #[test]
 fn a_latency_beside_a_slippery_floor_is_named_with_it() {
-    let latency = 0.104_399_207_407_454_23;
-    let (rec, model) = pioneer_recording(1042, |s| {
+    assert_pioneer_latency_and_floor_named(
+        1042,
+        0.104_399_207_407_454_23,
+        0.047_716_284_873_124_04,
+    );
+}
+
+/// The Pioneer-like robot's recording of seed `seed` with a command latency `latency` \[s\]
+/// and floor friction `mu`, diagnosed: `input_delay` and `traction_limit` are named, and the
+/// delay is within 20 % of `latency`.
+///
+/// # Panics
+/// Where they are not.
+fn assert_pioneer_latency_and_floor_named(seed: u64, latency: f64, mu: f64) {
+    let (rec, model) = pioneer_recording(seed, |s| {
         s.effects.latency_s = Some(latency);
-        s.effects.floor_mu = Some(0.047_716_284_873_124_04);
+        s.effects.floor_mu = Some(mu);
     });
     let (d, named) = diagnosed_named(&rec, model.as_ref());
     let text = wheelid::report::diagnosis_text(&d);
@@ -512,16 +525,11 @@ fn a_sub_two_period_latency_beside_a_slippery_floor_is_named_with_it() {
 /// delay is within 20 %.
 #[test]
 fn a_latency_beside_a_floor_no_start_favours_is_named_with_it() {
-    let latency = 0.087_700_379_365_971_51;
-    let (rec, model) = pioneer_recording(1061, |s| {
-        s.effects.latency_s = Some(latency);
-        s.effects.floor_mu = Some(0.056_422_408_308_908_16);
-    });
-    let (d, named) = diagnosed_named(&rec, model.as_ref());
-    let text = wheelid::report::diagnosis_text(&d);
-    assert_eq!(named, ["input_delay", "traction_limit"], "{text}");
-    let delay = finding_param(&d, "input_delay", "delay_s");
-    assert!((delay / latency - 1.0).abs() < 0.2, "delay_s {delay}");
+    assert_pioneer_latency_and_floor_named(
+        1061,
+        0.087_700_379_365_971_51,
+        0.056_422_408_308_908_16,
+    );
 }
 
 /// A command latency of 0.54 host periods (53.5 ms) beside a voltage clamp on the Pioneer-like
