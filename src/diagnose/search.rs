@@ -853,7 +853,9 @@ fn second_path(data: &Data, greedy: Outcome, mut other: Outcome) -> Outcome {
 /// rounds, from the nominal model located at `location`, search every candidate while the
 /// tests establish a mismatch; later ones (`location` `None`, after a measured effect is in,
 /// [`measured::settle`]) search only what [`measured::beside_measured`] names, while the model misses a
-/// relevant share.
+/// relevant share. With `forced` (a runner-up, [`second_path`]) the first round takes it in
+/// place of its own pick, with its refusals. The first round's runner-up is kept in
+/// `out.runner_up`.
 fn rounds(
     data: &Data,
     mut cur: Current,
