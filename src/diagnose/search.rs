@@ -442,8 +442,7 @@ fn screen(
 /// The last resort of a round that accepted nothing while the model in hand is above the
 /// noise floor: the candidates fitted by differences that [`budget::not_fitted`] skipped for
 /// their start and [`budget::last_resort`] names (`deferred`: their place in `fits` and their
-/// refusal in `rejected`) are fitted
-/// and judged after all, and the accepted one with the lowest [`information`] score over
+/// refusal in `rejected`) are fitted and judged after all, and the accepted one with the lowest [`information`] score over
 /// `n_eff` effective samples is returned; each one's refusal is replaced by its verdict, or
 /// removed where it is returned. A slippery floor beside an unmodelled dead time may have no
 /// start that lowers the cost: on the Pioneer-like robot (hold-out seed 1061, a 88 ms dead
@@ -794,8 +793,9 @@ fn path(
 /// `other` ([`run`]): `other` where its final model explains the validation blocks better for
 /// its parameters (Akaike's criterion over both models' judged samples, n_eff ln(J_other /
 /// J_greedy) + 2 (k_other − k_greedy) < 0, k the free parameters) and names other effects,
-/// its refusals then led by the greedy search's effects it does not hold. A dead time beside a voltage clamp on the Pioneer-like robot (hold-out
-/// seed 1057, 53.5 ms, looked at after its report): the first round's rate limit outscored the
+/// its refusals then led by the greedy search's effects it does not hold. A dead time beside
+/// a voltage clamp on the Pioneer-like robot (hold-out seed 1057, 53.5 ms, looked at after
+/// its report): the first round's rate limit outscored the
 /// dead time (information −33.2 against −26.0), the dead time beside it fitted to 21.6 ms and
 /// was refused, and the search ended at v 95.2 %, ω 92.6 %, unexplained; from the dead time, the
 /// clamp follows and the fits reach 100.0 %, 99.9 %.
