@@ -192,7 +192,7 @@ pub(super) fn search_on(
     progress: &Progress<'_>,
 ) -> Result<search::Outcome, DiagnoseError> {
     let Some(x) = data.excerpt(settings.search_samples) else {
-        return search::run(data, cur, settings, location, progress);
+        return paths::run(data, cur, settings, location, progress);
     };
     let start = x
         .nominal(&cur)
@@ -204,7 +204,7 @@ pub(super) fn search_on(
         x.data.dt,
         x.data.max_lag(settings),
     );
-    let mut out = search::run(&x.data, start, settings, &here, progress)?;
+    let mut out = paths::run(&x.data, start, settings, &here, progress)?;
     progress.step("refitting on the whole drive", 0);
     out.cur = Excerpt::refit(data, out.cur, &cur);
     Ok(out)

@@ -37,7 +37,8 @@
 //!    [`DiagnoseSettings::min_improvement`] (30 % of it where the fingerprint that nominated
 //!    it stands at p < 10⁻¹²: on a cost that is mostly the encoders' quantisation a real second
 //!    effect takes off only 1.5–5 %) with no channel's validation fit falling by more
-//!    than a point, its parameters are significant (≥ 3 standard errors from the null; a limit
+//!    than a point (excused where the cost drops by ≥ 10 %, `accept::FALL_EXCUSED_DROP`: two
+//!    effects may each buy one channel with the other), its parameters are significant (≥ 3 standard errors from the null; a limit
 //!    must bind on ≥ 1 % of the samples) and physically plausible, and its fingerprint is gone
 //!    (the pattern that nominated it, net of the other nominees, no longer fits the new
 //!    residual or is at least halved — for an effect smooth in its parameter this nearly
@@ -67,7 +68,7 @@
 //!    the noise floor, the search from the first round's runner-up (the best candidate that
 //!    passed and was outscored) is run too, and its final model replaces the greedy one where
 //!    it names other effects and explains the validation blocks better for its parameters
-//!    (Akaike's criterion). An effect that a sensor other than the encoders measures
+//!    (Akaike's criterion; `paths`). An effect that a sensor other than the encoders measures
 //!    ([`wheelid_core::Effect::measured`]: a larger tyre in a heading independent of the
 //!    encoders) is then in the model whatever the dynamics show — in place of the candidates
 //!    of its quantity, fitted within the bounds its measurement allows, held, and named with
@@ -102,6 +103,7 @@ mod fingerprint;
 mod fit;
 mod locate;
 mod measured;
+mod paths;
 mod place;
 mod prepare;
 mod score;

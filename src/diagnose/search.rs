@@ -2,6 +2,7 @@
 //! fingerprint (Holm over the family), screen and fit the nominees in order, accept the first
 //! that passes, drop what it makes redundant, and look again from the extended model.
 
+use super::paths::{RunnerUp, keep_runner_up};
 use super::*;
 
 /// What the search found.
@@ -18,16 +19,8 @@ pub(super) struct Outcome {
     /// Seconds of data searched on.
     pub(super) searched_s: f64,
     /// The best-scoring candidate the first round accepted and another outscored, with the
-    /// first round's refusals: where the search from it is tried ([`second_path`]).
-    runner_up: Option<RunnerUp>,
-}
-
-/// A first round's runner-up ([`Outcome::runner_up`]): its information score, its fit, and
-/// the round's refusals.
-struct RunnerUp {
-    score: f64,
-    fit: Accepted,
-    rejected: Vec<Rejected>,
+    /// first round's refusals: where the search from it is tried ([`paths::second_path`]).
+    pub(super) runner_up: Option<RunnerUp>,
 }
 
 /// One round's tests: the nominees and which the Holm family nominates, with the basis of
@@ -161,7 +154,7 @@ fn misses_relevant_share(fits: &Channels, nominal: bool) -> bool {
 
 /// The channels whose validation residual (`fits`) is above the noise floor by more than
 /// [`NOISE_FLOOR_FACTOR`] while their fit is below [`PRACTICAL_FIT_PERCENT`].
-fn above_floor(fits: &Channels) -> [bool; 2] {
+pub(super) fn above_floor(fits: &Channels) -> [bool; 2] {
     [fits.v, fits.w].map(|c| {
         (c.fit_percent.is_nan() || c.fit_percent < PRACTICAL_FIT_PERCENT)
             && c.noise_ratio > NOISE_FLOOR_FACTOR
@@ -390,18 +383,6 @@ fn first_accepted(
     best.map(|(_, x)| x)
 }
 
-/// Keeps `fit` (information score `score`) as the runner-up in `slot` where it scores better
-/// than the one there.
-fn keep_runner_up(slot: &mut Option<RunnerUp>, score: f64, fit: Accepted) {
-    if slot.as_ref().is_none_or(|r| score < r.score) {
-        *slot = Some(RunnerUp {
-            score,
-            fit,
-            rejected: Vec::new(),
-        });
-    }
-}
-
 /// Screens the nominees in `order` of `round` from the model in hand `cur` ([`start_candidate`],
 /// in parallel) and returns those with a start, the cheapest training cost first; every one
 /// joins `tried`, and those without a start join `rejected`.
@@ -558,7 +539,7 @@ impl Ahead {
 
 /// A nominee accepted in a round: its index, the extended model, its validation fits and the
 /// relative drop of the validation cost.
-type Accepted = (usize, Current, Channels, f64);
+pub(super) type Accepted = (usize, Current, Channels, f64);
 
 /// Fits tried after the first accepted one in a round ([`first_accepted`]).
 const MORE_FITS: usize = 2;
@@ -728,135 +709,14 @@ fn same_quantity(a: Candidate, b: Candidate) -> bool {
     a.effect().quantity().is_some() && a.effect().quantity() == b.effect().quantity()
 }
 
-/// Runs the search from the nominal model `cur` (module docs, steps 2–7); then, where
-/// another sensor measures an effect (`measured`), that effect takes the place of its
-/// quantity's alternatives in the model and the search goes on beside it for them alone.
-///
-/// Forward selection is greedy: where its final model leaves a channel above the noise floor
-/// ([`above_floor`]) and the first round had a runner-up, the search from the runner-up is
-/// tried too ([`second_path`]).
-pub(super) fn run(
-    data: &Data,
-    cur: Current,
-    settings: &DiagnoseSettings,
-    location: &Location,
-    progress: &Progress<'_>,
-) -> Result<Outcome, DiagnoseError> {
-    let mut out = path(data, cur.clone(), settings, location, progress, None);
-    let (fits, _) = data.validate_on(&out.cur.sim, &data.judged(&[&out.cur]));
-    if !above_floor(&fits).iter().any(|&a| a) {
-        return Ok(out);
-    }
-    let Some(runner_up) = out.runner_up.take() else {
-        return Ok(out);
-    };
-    let other = path(data, cur, settings, location, progress, Some(runner_up));
-    Ok(second_path(data, out, other))
-}
-
-/// One forward selection from the nominal model `cur` located at `location` ([`run`]), the
-/// first round's pick `forced` where given, then the measured effects' turn
-/// ([`measured::settle`]).
-fn path(
-    data: &Data,
-    cur: Current,
-    settings: &DiagnoseSettings,
-    location: &Location,
-    progress: &Progress<'_>,
-    forced: Option<RunnerUp>,
-) -> Outcome {
-    let mut out = Outcome {
-        cur: cur.clone(),
-        findings: Vec::new(),
-        rejected: Vec::new(),
-        rounds: Vec::new(),
-        tests: Vec::new(),
-        mismatch: false,
-        searched_s: data.recs.iter().map(Recording::len).sum::<usize>() as f64 * data.dt,
-        runner_up: None,
-    };
-    let first = (Some(location), forced);
-    let cur = rounds(data, cur, settings, first, progress, &mut out);
-    let (cur, settled) = measured::settle(data, cur, &mut out);
-    let cur = if settled {
-        // A measured effect is a mismatch of the nominal model whatever the dynamics show.
-        out.mismatch = true;
-        rounds(data, cur, settings, (None, None), progress, &mut out)
-    } else {
-        cur
-    };
-    out.cur = cur;
-    out
-}
-
-/// The better of the greedy search `greedy` and the search from its first round's runner-up
-/// `other` ([`run`]): `other` where its final model explains the validation blocks better for
-/// its parameters (Akaike's criterion over both models' judged samples, n_eff ln(J_other /
-/// J_greedy) + 2 (k_other − k_greedy) < 0, k the free parameters) and names other effects,
-/// its refusals then led by the greedy search's effects it does not hold. A dead time beside
-/// a voltage clamp on the Pioneer-like robot (hold-out seed 1057, 53.5 ms, looked at after
-/// its report): the first round's rate limit outscored the
-/// dead time (information −33.2 against −26.0), the dead time beside it fitted to 21.6 ms and
-/// was refused, and the search ended at v 95.2 %, ω 92.6 %, unexplained; from the dead time, the
-/// clamp follows and the fits reach 100.0 %, 99.9 %.
-fn second_path(data: &Data, greedy: Outcome, mut other: Outcome) -> Outcome {
-    let judged = data.judged(&[&greedy.cur, &other.cur]);
-    let (fits_g, cost_g) = data.validate_on(&greedy.cur.sim, &judged);
-    let (fits_o, cost_o) = data.validate_on(&other.cur.sim, &judged);
-    let n_eff = data.effective_samples(&greedy.cur.sim);
-    let free = |c: &Current| (c.theta.len() - c.pinned.len()) as f64;
-    let score = n_eff * (cost_o / cost_g).ln() + 2.0 * (free(&other.cur) - free(&greedy.cur));
-    let named =
-        |o: &Outcome| -> Vec<String> { o.findings.iter().map(|f| f.effect.clone()).collect() };
-    let (ours, theirs) = (named(&greedy), named(&other));
-    let mut sorted = [ours.clone(), theirs.clone()];
-    sorted.iter_mut().for_each(|n| n.sort());
-    // The same effects by another order are the same explanation: the greedy report stands.
-    let better = score < 0.0; // false for a NaN score
-    if !better || sorted[0] == sorted[1] {
-        return greedy;
-    }
-    let gone: Vec<&str> = (ours.iter())
-        .filter(|e| !theirs.contains(e))
-        .map(String::as_str)
-        .collect();
-    let list = |n: &[String]| {
-        if n.is_empty() {
-            "nothing".into()
-        } else {
-            n.join(" + ")
-        }
-    };
-    if !gone.is_empty() {
-        other.rejected.insert(
-            0,
-            Rejected {
-                effect: gone.join(" + "),
-                reason: format!(
-                    "the greedy search ends at {} with v {:.1} %, ω {:.1} %; the search from \
-                     its first round's runner-up ends at {} with v {:.1} %, ω {:.1} %, better \
-                     for its parameters (information {score:.1})",
-                    list(&ours),
-                    fits_g.v.fit_percent,
-                    fits_g.w.fit_percent,
-                    list(&theirs),
-                    fits_o.v.fit_percent,
-                    fits_o.w.fit_percent
-                ),
-            },
-        );
-    }
-    other
-}
-
 /// Forward selection from `cur` (module docs, steps 2–7), recording into `out`: the first
 /// rounds, from the nominal model located at `location`, search every candidate while the
 /// tests establish a mismatch; later ones (`location` `None`, after a measured effect is in,
 /// [`measured::settle`]) search only what [`measured::beside_measured`] names, while the model misses a
-/// relevant share. With `forced` (a runner-up, [`second_path`]) the first round takes it in
+/// relevant share. With `forced` (a runner-up, [`paths::second_path`]) the first round takes it in
 /// place of its own pick, with its refusals. The first round's runner-up is kept in
 /// `out.runner_up`.
-fn rounds(
+pub(super) fn rounds(
     data: &Data,
     mut cur: Current,
     settings: &DiagnoseSettings,
