@@ -659,9 +659,9 @@ fn unjudged(data: &Data, new: &Current) -> String {
     )
 }
 
-/// Backward step: an effect added before `added` that it makes redundant (without it the
+/// Backward step: an effect other than `added` that it makes redundant (without it the
 /// validation cost rises by less than `min_improvement`) is removed, and joins `tried`.
-fn backward_step(
+pub(super) fn backward_step(
     data: &Data,
     cur: Current,
     added: Candidate,
@@ -672,9 +672,9 @@ fn backward_step(
     if cur.candidates.len() < 2 {
         return cur;
     }
-    for k in (0..cur.candidates.len() - 1).rev() {
+    for k in (0..cur.candidates.len()).rev() {
         // What another sensor measures stays, however little the dynamics show it.
-        if data.measurement(cur.candidates[k]).is_some() {
+        if cur.candidates[k] == added || data.measurement(cur.candidates[k]).is_some() {
             continue;
         }
         let Ok(without) = remove_candidate(data, &cur, k) else {
