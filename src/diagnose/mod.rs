@@ -72,7 +72,8 @@
 //!    ([`wheelid_core::Effect::measured`]: a larger tyre in a heading independent of the
 //!    encoders) is then in the model whatever the dynamics show — in place of the candidates
 //!    of its quantity, fitted within the bounds its measurement allows, held, and named with
-//!    the measurement as its evidence — and the search goes on for the effects the encoders
+//!    the measurement as its evidence; an effect it makes redundant is dropped (one found
+//!    for what the stand-in it replaced left) — and the search goes on for the effects the encoders
 //!    cannot tell from it alone (a weak amplifier beside the tyre; `measured`), under the
 //!    whole drop gate (what the measured effect's hold leaves shows as their fingerprint). What stays
 //!    significant or above the noise floor in a channel
