@@ -563,7 +563,7 @@ fn a_latency_beside_a_floor_no_start_favours_is_named_with_it() {
 /// outscored the dead time on the information criterion, the dead time fitted beside it
 /// landed at 21.6 ms and was refused, and the greedy search ended at v 95.2 %, ω 92.6 % with
 /// a rate limit and the clamp, `unexplained`. Where the greedy search ends above the noise
-/// floor, the search from the first round's runner-up is tried (`search::second_path`): from
+/// floor, the search from the first round's runner-up is tried (`paths::second_path`): from
 /// the dead time the clamp follows, both within 5 %, at fits of 99.9 % and more.
 #[test]
 fn a_latency_beside_a_clamp_is_found_from_the_first_rounds_runner_up() {
