@@ -89,8 +89,10 @@
 # 1057-1061 (single, clean; pairs window_end) and clean 4971-5070 once at c7737b9, then 1061's
 # dead time beside the floor (a last resort, 3238b24) and 1057's dead time beside a clamp (the
 # runner-up's path, b63c762) were looked at; 1062-1066 (single, clean; pairs window_end) and
-# clean 5071-5170 once at b63c762 (1062-1063 partly run at 3238b24 first, stopped unread); the
-# next report takes 1067.. and 5171.. .
+# clean 5071-5170 once at b63c762 (1062-1063 partly run at 3238b24 first, stopped unread);
+# 1067-1071 (single, clean; pairs window_end) and clean 5171-5270 once at 0abfd4c (1067-1068
+# partly run at f1f3d2d first, stopped unread), then 1072-1076 (single, clean; pairs
+# window_end) once at 0abfd4c; the next report takes 1077.. and 5271.. .
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
