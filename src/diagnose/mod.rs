@@ -38,8 +38,9 @@
 //!    it stands at p < 10⁻¹²: on a cost that is mostly the encoders' quantisation a real second
 //!    effect takes off only 1.5–5 %) with no channel's validation fit falling by more
 //!    than a point (excused where the cost drops by ≥ 10 %, `accept::FALL_EXCUSED_DROP`: two
-//!    effects may each buy one channel with the other), its parameters are significant (≥ 3 standard errors from the null; a limit
-//!    must bind on ≥ 1 % of the samples) and physically plausible, and its fingerprint is gone
+//!    effects may each buy one channel with the other), its parameters are significant (≥ 3
+//!    standard errors from the null; a limit must bind on ≥ 1 % of the samples) and
+//!    physically plausible, and its fingerprint is gone
 //!    (the pattern that nominated it, net of the other nominees, no longer fits the new
 //!    residual or is at least halved — for an effect smooth in its parameter this nearly
 //!    follows from the fit; it bites for the limits, whose pattern is a probe at a level read
@@ -73,10 +74,10 @@
 //!    encoders) is then in the model whatever the dynamics show — in place of the candidates
 //!    of its quantity, fitted within the bounds its measurement allows, held, and named with
 //!    the measurement as its evidence; an effect it makes redundant is dropped (one found
-//!    for what the stand-in it replaced left) — and the search goes on for the effects the encoders
-//!    cannot tell from it alone (a weak amplifier beside the tyre; `measured`), under the
-//!    whole drop gate (what the measured effect's hold leaves shows as their fingerprint). What stays
-//!    significant or above the noise floor in a channel
+//!    for what the stand-in it replaced left, `paths`) — and the search goes on for the
+//!    effects the encoders cannot tell from it alone (a weak amplifier beside the tyre;
+//!    `measured`), under the whole drop gate (what the measured effect's hold leaves shows as
+//!    their fingerprint). What stays significant or above the noise floor in a channel
 //!    fitted below [`PRACTICAL_FIT_PERCENT`] once the noise floor is taken out of its residual
 //!    ([`ChannelFit::noise_corrected_fit_percent`]: the sensor's own noise is no unexplained
 //!    physics), and any channel below [`LOW_FIT_PERCENT`], is reported as [`Unexplained`],

@@ -1,7 +1,9 @@
 //! The search's paths: forward selection is greedy, so where its final model leaves a channel
 //! above the noise floor the whole search is run again from the first round's runner-up (the
 //! best candidate that passed its verdict and was outscored on the information criterion),
-//! and the better of the two explanations is kept.
+//! and the better of the two explanations is kept. Each path ends with the measured effects'
+//! turn: placed in the model, they drop what they make redundant, and the search goes on
+//! beside them.
 //!
 //! For the greedy model g and the other o, judged on the same validation samples (n_eff of
 //! them after the residual's autocorrelation, J the validation cost, k the free parameters):
