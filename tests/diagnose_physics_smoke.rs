@@ -131,7 +131,8 @@ fn a_pioneer_voltage_clamp_fitted_to_99_percent_is_kept() {
 /// candidate (2026-11-25) no candidate modelled it and every floor run ended `unexplained`;
 /// now it is named, with the top acceleration within 20 % of μ g (1 − b/x_c) (what the floor can
 /// pass to the driven wheels: the caster at x_c carries the share b/x_c of the weight), the
-/// load transfer within 20 % of μ r/x_c (the centre of mass at the axle's height r), and both
+/// load transfer within 20 % of μ (r + 2 I_e/(m r))/x_c (the centre of mass at the axle's height
+/// r, and the wheels' spin momentum), and both
 /// channels explained to ≥ 95 %.
 #[test]
 fn a_pioneer_on_a_slippery_floor_is_named_traction_limit() {
@@ -148,18 +149,18 @@ fn a_pioneer_on_a_slippery_floor_is_named_traction_limit() {
     let mu = r.truth_params["floor_mu"]["mu"];
     let a = r.named_params["traction_limit"]["accel_max"];
     let p = wheelid::robots::physics::PhysicalProfile::pioneer3dx();
-    let limit = mu * 9.81 * (1.0 - p.b / p.caster_x);
+    let limit = mu * 9.81 * p.wheel_load_share();
     assert!(
         (a - limit).abs() <= 0.2 * limit,
         "a_max {a} vs μ g (1 − b/x_c) {limit}"
     );
     // Accelerating pitches the body onto its wheels: the centre of mass at the axle's height r
-    // moves m a r/x_c of load, a load transfer of μ r/x_c.
+    // and the wheels' spin momentum move F (r + 2 I_e/(m r))/x_c of load.
     let lt = r.named_params["traction_limit"]["load_transfer"];
-    let pitch = mu * p.r / p.caster_x;
+    let pitch = mu * p.load_transfer_per_force();
     assert!(
         (lt - pitch).abs() <= 0.2 * pitch,
-        "load_transfer {lt} vs μ r/x_c {pitch}"
+        "load_transfer {lt} vs μ (r + 2 I_e/(m r))/x_c {pitch}"
     );
 }
 

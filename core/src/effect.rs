@@ -82,8 +82,9 @@ pub struct Terms {
 /// acceleration pitches it and moves weight between the wheels and the caster, so each wheel's
 /// limit grows with the force T_v it passes (solved, (c + p T_v) = c/(1 − p ḡ), ḡ the mean of
 /// the two tanh). For a centre of mass at height h and a caster at x_c from the axle,
-/// p = μ h/x_c, positive where the caster is ahead (pulling forward loads the wheels): on the
-/// physics backend's Khepera-like robot on a floor of μ ≈ 0.2, p ≈ 0.10 — 10 % more grip
+/// p = μ (h + 2 I_e/(m r))/x_c (the wheels' spin momentum, I_e each, adds to the pitching
+/// moment), positive where the caster is ahead (pulling forward loads the wheels): on the
+/// physics backend's Khepera-like robot on a floor of μ ≈ 0.2, p ≈ 0.1 — 10 % more grip
 /// accelerating, 10 % less braking (the axle loads of a vehicle under traction: J. Y. Wong,
 /// *Theory of Ground Vehicles*, 4th ed. (2008) §3.1). In grip (s → 0) the sum of each pair
 /// is eq. 2.19. Source: the rigid-wheel/Coulomb-contact picture of Siegwart & Nourbakhsh,

@@ -61,7 +61,7 @@ pub fn demand(
     let dt = p.period_s;
     let (tau_v, tau_w) = (th[0] / th[3], th[1] / th[5]);
     let i_ax = p.i_z + p.m * p.b * p.b;
-    let n_wheels = p.m * 9.81 * (1.0 - p.b / p.caster_x) / 2.0;
+    let n_wheels = p.m * 9.81 * p.wheel_load_share() / 2.0;
     let n = (duration / dt).floor() as usize;
     let (mut v, mut w) = (0.0, 0.0);
     let mut prev = exc.at(0.0);
@@ -346,7 +346,8 @@ fn draw_plain(
 /// `coulomb_friction` acts on v and ω, not
 /// per wheel, so its values are a looser match); payload time vs `time_s` and the loaded map's θ1 vs
 /// `theta1_after`; a slippery floor's μ g (1 − b/x_c) (the driven wheels' share of the weight)
-/// vs `accel_max` and μ r/x_c (the centre of mass at the axle's height) vs `load_transfer`.
+/// vs `accel_max` and μ (r + 2 I_e/(m r))/x_c (the moment balance of
+/// `PhysicalProfile::load_transfer_per_force`) vs `load_transfer`.
 /// Everything else is `n/a`.
 pub fn magnitudes(
     p: &PhysicalProfile,
@@ -463,20 +464,20 @@ pub fn magnitudes(
                     false,
                 );
             }
-            // The driven wheels carry the weight less the caster's share b/x_c (statics of
-            // the chassis on its three contacts): the floor passes at most μ g (1 − b/x_c).
-            // Accelerating, the centre of mass at the axle's height r moves the load
-            // m a r/x_c onto the wheels: the load transfer μ r/x_c.
+            // The driven wheels carry the weight less the caster's share b/x_c: the floor
+            // passes at most μ g (1 − b/x_c). Accelerating moves the load F (r + 2 I_e/(m r))/x_c
+            // onto them (`PhysicalProfile::load_transfer_per_force`, borne out by the engine's
+            // contact forces).
             "floor_mu" => {
                 push(
                     "μ g (1 − b/x_c) vs accel_max",
-                    g("mu") * 9.81 * (1.0 - p.b / p.caster_x),
+                    g("mu") * 9.81 * p.wheel_load_share(),
                     est("accel_max"),
                     false,
                 );
                 push(
-                    "μ r/x_c vs load_transfer",
-                    g("mu") * p.r / p.caster_x,
+                    "μ (r + 2 I_e/(m r))/x_c vs load_transfer",
+                    g("mu") * p.load_transfer_per_force(),
                     est("load_transfer"),
                     false,
                 );

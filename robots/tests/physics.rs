@@ -132,7 +132,7 @@ fn on_a_slippery_floor_the_body_accelerates_at_the_traction_limit() {
     let x = rec.x.as_ref().expect("pose");
     let k = rec.len() - 1;
     let t = rec.t[k];
-    let a_max = mu * 9.81 * (1.0 - p.b / p.caster_x);
+    let a_max = mu * 9.81 * p.wheel_load_share();
     let body_v = (x[k] - x[k - 1]) / (rec.t[k] - rec.t[k - 1]);
     assert!(
         body_v <= 1.05 * a_max * t,

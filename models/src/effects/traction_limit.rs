@@ -7,8 +7,9 @@
 //! With ε the wheels' share of θ1, θ2, a_max the body's top straight-line acceleration (μ g ×
 //! the driven wheels' share of the weight), κ = μ d/2 each wheel's share of the ω force (as
 //! `effort_clamp`'s mix) and p the load transfer (the body's acceleration pitches it onto or
-//! off its wheels: p = μ h/x_c for a centre of mass at height h and a caster x_c ahead of the
-//! axle), the dynamics are [`wheelid_core::Traction`]'s:
+//! off its wheels: p = μ (h + 2 I_e/(m r))/x_c for a centre of mass at height h, wheels of spin
+//! inertia I_e and a caster x_c ahead of the axle), the dynamics are
+//! [`wheelid_core::Traction`]'s:
 //!
 //! ```text
 //! ε θ1 v̇_w = f_v − T_v,   (1 − ε) θ1 v̇_b = T_v       t_R,L = T_v ± κ T_ω = (c + p T_v) tanh(s_R,L/s0)
@@ -56,7 +57,7 @@ static PARAMS: [ParamInfo; 4] = [
     },
 ];
 
-/// Largest plausible load transfer |p| = μ h/x_c [-]: a centre of mass as high as the caster
+/// Largest plausible load transfer |p| ≈ μ h/x_c [-]: a centre of mass as high as the caster
 /// is far from the axle on a floor of μ = 0.5. The fit may go to 0.6; fitted floors: p ≈ 0.1
 /// on the Khepera-like robot (μ ≈ 0.2, h/x_c ≈ 0.5), ≈ 0.03 on the Pioneer-like one.
 const LOAD_TRANSFER_MAX: f64 = 0.5;

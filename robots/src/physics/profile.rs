@@ -301,6 +301,28 @@ impl PhysicalProfile {
         }
     }
 
+    /// Share of the weight on the driven wheels, 1 − b/x_c [-]: the statics of the chassis on
+    /// its three contacts, the caster at x_c carrying b/x_c. On a floor of friction μ the
+    /// wheels pass the body at most μ g (1 − b/x_c) of acceleration from rest.
+    pub fn wheel_load_share(&self) -> f64 {
+        1.0 - self.b / self.caster_x
+    }
+
+    /// Load moved onto the driven wheels per unit of the floor's traction force on them,
+    /// (r + 2 I_e/(m r))/x_c [-], while they roll (× μ: `traction_limit`'s `load_transfer`).
+    ///
+    /// Moments about the centre of mass, which sits at the axle's height r: the traction
+    /// F = m a acts r below it, and the wheels' spin momentum 2 I_e v/r grows at 2 I_e a/r;
+    /// the load ΔN shifted between the wheels and the caster x_c away balances both,
+    /// x_c ΔN = F r + 2 I_e a/r (the motors' torque on the wheels). The spin term is 2.3 % of
+    /// the whole on the Pioneer-like profile and 12.8 % on the Khepera-like one; the engine's
+    /// contact forces bear it out (`engine`'s tests). Here all of I_e spins with the wheel;
+    /// on a real robot a rotor geared N : 1 carries only 1/N of the momentum of its share of
+    /// I_e (and may turn the other way).
+    pub fn load_transfer_per_force(&self) -> f64 {
+        (self.r + 2.0 * self.i_e / (self.m * self.r)) / self.caster_x
+    }
+
     /// Physics steps per controller period (1 without a controller period).
     pub fn controller_steps(&self) -> usize {
         self.controller_period_s
