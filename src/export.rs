@@ -113,10 +113,12 @@ pub fn ros2_yaml(model: &ModelFile, profile: Option<&RobotProfile>, source: &str
         let _ = writeln!(s, "  time_constant_v_s: {}", th[0] / th[3]);
         let _ = writeln!(s, "  time_constant_w_s: {}", th[1] / th[5]);
     }
-    let delay = model
-        .effects
-        .get("input_delay")
-        .and_then(|m| m.get("delay_s"));
-    let _ = writeln!(s, "  delay_s: {}", delay.copied().unwrap_or(0.0));
+    // The dead time between a command and what the encoders show: the commands' and the
+    // measurements' together.
+    let delay: f64 = ["input_delay", "output_delay"]
+        .iter()
+        .filter_map(|e| model.effects.get(*e).and_then(|m| m.get("delay_s")))
+        .sum();
+    let _ = writeln!(s, "  delay_s: {delay}");
     s
 }

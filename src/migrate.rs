@@ -16,7 +16,8 @@ use crate::files::ModelFile;
 /// The [`RobotModel`] of a model file on `profile`'s robot: θ and standard errors from the
 /// file; period and limits from the profile, tightened by what a diagnosis found
 /// (`velocity_saturation` `v_max`/`w_max`, `acceleration_limit` `v_accel_max`/`w_accel_max`,
-/// `input_delay` `delay_s`).
+/// the dead time: `input_delay` and `output_delay` `delay_s` together, which a controller's
+/// loop meets alike).
 ///
 /// # Errors
 /// [`Error::InvalidSetting`] when the file's θ does not have 6 values.
@@ -44,7 +45,13 @@ pub fn robot_model(file: &ModelFile, profile: &RobotProfile) -> Result<RobotMode
     if av.is_some() || aw.is_some() {
         m.accel_max = Some([av.unwrap_or(f64::INFINITY), aw.unwrap_or(f64::INFINITY)]);
     }
-    m.delay_s = get("input_delay", "delay_s");
+    let (din, dout) = (
+        get("input_delay", "delay_s"),
+        get("output_delay", "delay_s"),
+    );
+    if din.is_some() || dout.is_some() {
+        m.delay_s = Some(din.unwrap_or(0.0) + dout.unwrap_or(0.0));
+    }
     Ok(m)
 }
 

@@ -39,6 +39,11 @@ use crate::{ParamInfo, Recording, Result};
 pub struct Terms {
     /// Dead time of the commands \[s\].
     pub delay: f64,
+    /// Dead time of the measurements \[s\]: the outputs stamped t are the robot's at t − this
+    /// (a sensor or transport delay). Every stage but a payload change and a drive-gain drift
+    /// is time-invariant, so it acts as a dead time of the commands added to `delay`, with
+    /// the change's time and the drift's clock moved by it.
+    pub output_delay: f64,
     /// Largest rate of change of the (v, ω) setpoints [m/s², rad/s²].
     pub accel: Option<[f64; 2]>,
     /// Largest |v|, |ω| setpoint [m/s, rad/s].
@@ -63,6 +68,14 @@ pub struct Terms {
     /// [`Traction`] stage the tyre acts at its contact instead: ρ = 1/this is read there, and
     /// the row and the effort's 1/ρ are not applied to the wheels' own inertia.
     pub right_row: Option<f64>,
+}
+
+impl Terms {
+    /// The dead time between a command and the output it shows in \[s\]: the commands' and
+    /// the measurements' together.
+    pub fn dead_time(&self) -> f64 {
+        self.delay + self.output_delay
+    }
 }
 
 /// A traction limit (`traction_limit`): the wheels and the body as two inertias, θ1, θ2 split

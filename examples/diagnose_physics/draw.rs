@@ -148,6 +148,7 @@ pub fn friction_loss_per_nm(p: &PhysicalProfile) -> (f64, f64) {
 /// | effect | magnitude |
 /// | --- | --- |
 /// | latency | (0.5 + 2.5u) host periods |
+/// | sensor_delay | (0.5 + 2.5u) host periods |
 /// | rate_limit | (0.2 + 0.3u) × the 95th percentile of the command's slope \|Δu\|/Δ, v and ω alike |
 /// | voltage_clamp | the (0.80 + 0.15u)-quantile of the per-period peak voltage ([`Demand`]; behind a rate limit, under the setpoints it slews): binds in ~5–20 % of the periods |
 /// | gain_sag | fraction 0.1 + 0.2u lost by the run's end |
@@ -280,6 +281,12 @@ fn draw_plain(
             m.insert("latency_s".into(), periods * p.period_s);
             m.insert("periods".into(), periods);
         }
+        "sensor_delay" => {
+            let periods = 0.5 + 2.5 * u(0);
+            fx.sensor_delay_s = Some(periods * p.period_s);
+            m.insert("sensor_delay_s".into(), periods * p.period_s);
+            m.insert("periods".into(), periods);
+        }
         "gain_sag" => {
             let f = 0.1 + 0.2 * u(0);
             fx.gain_sag = Some(f);
@@ -384,6 +391,12 @@ pub fn magnitudes(
             "latency" => push(
                 "latency_s vs delay_s",
                 g("latency_s"),
+                est("delay_s"),
+                false,
+            ),
+            "sensor_delay" => push(
+                "sensor_delay_s vs delay_s",
+                g("sensor_delay_s"),
                 est("delay_s"),
                 false,
             ),

@@ -73,8 +73,10 @@ pub use report::*;
 /// (`wheel_friction`) or by loops on v and ω (`vw_friction`, the Pioneer-like robot's); a
 /// Coulomb term on v and ω (`coulomb_friction`) is accepted too; on a slippery floor the
 /// wheels run ahead of the body at high demand (`traction_limit`; the older setpoint-level
-/// `slip` is still accepted).
-pub const TRUTH: [(&str, &[&str]); 10] = [
+/// `slip` is still accepted); the encoders' readings reaching the host late (a sensor delay) is
+/// named right only as `output_delay`, which the backend's true heading measures (from the
+/// encoders alone it is a dead time of the commands, `input_delay`).
+pub const TRUTH: [(&str, &[&str]); 11] = [
     ("latency", &["input_delay", "latency"]),
     ("rate_limit", &["acceleration_limit"]),
     ("voltage_clamp", &["effort_clamp"]),
@@ -91,6 +93,7 @@ pub const TRUTH: [(&str, &[&str]); 10] = [
     ),
     ("floor_mu", &["traction_limit", "slip"]),
     ("payload", &["payload_change"]),
+    ("sensor_delay", &["output_delay"]),
 ];
 
 /// Pairs of physics effects that move one quantity the encoders see, so that one candidate

@@ -15,7 +15,7 @@ static PARAMS: [ParamInfo; 1] = [ParamInfo {
 /// jitter) and the window averages' quadrature already settle to: a fit that leans on it is
 /// reading timing noise (seen: 2 ms at a 20 ms period beside a traction limit), not a link's
 /// or a controller's latency, which is a sizeable part of a cycle or more.
-const MIN_PERIODS: f64 = 0.25;
+pub(super) const MIN_PERIODS: f64 = 0.25;
 
 /// Dead time τ \[s\] of the commands (stage 1 of [`Terms`]); null 0, fitted within [0, 2] s,
 /// plausible from `MIN_PERIODS` sample periods up to 1.5 s.
@@ -51,23 +51,42 @@ impl Effect for InputDelay {
         se: f64,
         fit: &FitData<'_>,
     ) -> std::result::Result<(), String> {
-        significant(&PARAMS[j], x, se, 0.0)?;
-        if x > 1.5 {
-            return Err(format!("a dead time of {x:.3} s is not plausible"));
-        }
-        let period = fit.period_s();
-        if x < MIN_PERIODS * period {
-            return Err(format!(
-                "a dead time of {x:.4} s is under {MIN_PERIODS} of the {period:.4} s sample \
-                 period: not told apart from how the host stamps its samples"
-            ));
-        }
-        Ok(())
+        dead_time_plausible(&PARAMS[j], x, se, fit)
     }
     fn apply(&self, p: &[f64], terms: &mut Terms) -> Result<()> {
         terms.delay = p[0];
         Ok(())
     }
+    /// "dead time", with `output_delay`: from the commands and the encoders alone a dead time
+    /// of the measurements is one of the commands.
+    fn quantity(&self) -> Option<&'static str> {
+        Some(super::DEAD_TIME)
+    }
+}
+
+/// A dead time `x` ± `se` \[s\] (parameter `info`) is named where it is significant, at most
+/// 1.5 s, and at least [`MIN_PERIODS`] sample periods of `fit`'s recordings.
+///
+/// # Errors
+/// The reason for the report.
+pub(super) fn dead_time_plausible(
+    info: &ParamInfo,
+    x: f64,
+    se: f64,
+    fit: &FitData<'_>,
+) -> std::result::Result<(), String> {
+    significant(info, x, se, 0.0)?;
+    if x > 1.5 {
+        return Err(format!("a dead time of {x:.3} s is not plausible"));
+    }
+    let period = fit.period_s();
+    if x < MIN_PERIODS * period {
+        return Err(format!(
+            "a dead time of {x:.4} s is under {MIN_PERIODS} of the {period:.4} s sample \
+             period: not told apart from how the host stamps its samples"
+        ));
+    }
+    Ok(())
 }
 
 #[cfg(test)]

@@ -9,6 +9,7 @@ mod coulomb_friction;
 mod effort_clamp;
 mod gain_drift;
 mod input_delay;
+mod output_delay;
 mod payload_change;
 mod slip;
 mod traction_limit;
@@ -27,6 +28,7 @@ pub use coulomb_friction::CoulombFriction;
 pub use effort_clamp::EffortClamp;
 pub use gain_drift::GainDrift;
 pub use input_delay::InputDelay;
+pub use output_delay::{LAG_Z, MAX_LAG_S, OutputDelay, heading_lag};
 pub use payload_change::PayloadChange;
 pub use slip::Slip;
 pub use traction_limit::TractionLimit;
@@ -37,7 +39,7 @@ pub use wheel_asymmetry::WheelAsymmetry;
 pub use wheel_friction::WheelFriction;
 
 /// The registry: every built-in effect, in the order the diagnosis reports them.
-pub static EFFECTS: [&dyn Effect; 14] = [
+pub static EFFECTS: [&dyn Effect; 15] = [
     &InputDelay,
     &AccelerationLimit,
     &VelocitySaturation,
@@ -52,6 +54,7 @@ pub static EFFECTS: [&dyn Effect; 14] = [
     &TractionLimit,
     &TyreAsymmetry,
     &VwFriction,
+    &OutputDelay,
 ];
 
 /// [`Effect::quantity`] of the effects that make one wheel act weaker than the other
@@ -65,6 +68,10 @@ pub const DRY_FRICTION: &str = "dry friction";
 /// [`Effect::quantity`] of the wheels slipping on the floor, as losses (`slip`) or as a
 /// traction limit (`traction_limit`).
 pub const FLOOR_SLIP: &str = "floor slip";
+/// [`Effect::quantity`] of a dead time between the commands and the measurements, of the
+/// commands (`input_delay`) or of the measurements (`output_delay`): a dead time commutes with
+/// a time-invariant robot, so the encoders alone see only their sum.
+pub const DEAD_TIME: &str = "dead time";
 
 /// A value far beyond any command: a limit at this level never binds (a limit's null).
 pub const NEVER: f64 = 1e6;
@@ -165,6 +172,8 @@ impl Candidate {
     pub const TYRE_ASYMMETRY: Candidate = Candidate(&TyreAsymmetry);
     /// Dry friction per wheel met by v and ω loops ([`VwFriction`]).
     pub const VW_FRICTION: Candidate = Candidate(&VwFriction);
+    /// Dead time of the measurements ([`OutputDelay`]).
+    pub const OUTPUT_DELAY: Candidate = Candidate(&OutputDelay);
 
     /// A candidate for any effect (a built-in one of [`EFFECTS`] or the caller's own).
     pub fn new(effect: &'static dyn Effect) -> Self {

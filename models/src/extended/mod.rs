@@ -6,7 +6,9 @@
 //!
 //! With u the recorded command (held between samples), at time t:
 //!
-//! 1. `input_delay` (`delay_s`): u(t − delay_s);
+//! 1. `input_delay` (`delay_s`): u(t − delay_s); `output_delay` (`delay_s`, τ_o) adds to it,
+//!    the outputs stamped t being the robot's at t − τ_o (a payload change's time and the
+//!    drift's clock move by τ_o);
 //! 2. `velocity_saturation` (`v_max`, `w_max`): the setpoint clipped to ±v_max, ±w_max;
 //! 3. `acceleration_limit` (`v_accel_max`, `w_accel_max`): the setpoint slews towards that at
 //!    most at the given rates (exact slew per integration sub-step);
@@ -605,7 +607,7 @@ impl Extended {
         let mut setpoint = if ph.accel.is_some() {
             Cmd::at([hold.0, hold.1], dhold, sens)
         } else {
-            pipe.target(command(t0 - ph.delay))
+            pipe.target(command(t0 - ph.dead_time()))
         };
         let fixed_setpoint = run.zoh && ph.accel.is_none() && ph.drift == 0.0;
         let m = grid.len();
@@ -737,8 +739,14 @@ impl<'a> Run<'a> {
                 initial.len()
             )));
         };
-        let extra: Vec<f64> = ph.payload.map(|(t, _)| t).into_iter().collect();
-        let (grid, index) = merged_grid(rec, ph.delay, &extra)?;
+        // A dead time of the measurements moves the payload change's time and the drift's
+        // clock with it (`Terms::output_delay`).
+        let extra: Vec<f64> = ph
+            .payload
+            .map(|(t, _)| t + ph.output_delay)
+            .into_iter()
+            .collect();
+        let (grid, index) = merged_grid(rec, ph.dead_time(), &extra)?;
         Ok(Self {
             v0,
             w0,
@@ -754,7 +762,7 @@ impl<'a> Run<'a> {
                 ph,
                 track,
                 t0: rec.t[0],
-                origin: rec.drive_start(),
+                origin: rec.drive_start() + ph.output_delay,
             },
         })
     }
@@ -763,7 +771,7 @@ impl<'a> Run<'a> {
     /// happened by its middle, else `before`.
     fn in_force<T: Copy>(&self, ta: f64, tb: f64, before: T, after: Option<T>) -> T {
         match (self.pipe.ph.payload, after) {
-            (Some((ts, _)), Some(a)) if 0.5 * (ta + tb) >= ts => a,
+            (Some((ts, _)), Some(a)) if 0.5 * (ta + tb) >= ts + self.pipe.ph.output_delay => a,
             _ => before,
         }
     }
@@ -771,7 +779,7 @@ impl<'a> Run<'a> {
     /// The delayed recorded commands at the interval's start and end (`command`: the command
     /// at an instant [s]); one, at the middle, when commands are held.
     fn commands<C: Copy>(&self, ta: f64, tb: f64, command: &mut impl FnMut(f64) -> C) -> (C, C) {
-        let delay = self.pipe.ph.delay;
+        let delay = self.pipe.ph.dead_time();
         let ca = command(if self.zoh { 0.5 * (ta + tb) } else { ta } - delay);
         let cb = if self.zoh { ca } else { command(tb - delay) };
         (ca, cb)

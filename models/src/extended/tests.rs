@@ -206,6 +206,11 @@ fn analytic_sensitivities_match_central_differences_with_every_candidate() {
             vec![3.3, 0.3, 0.3, -0.04, 0.1],
         ),
         (vec![Candidate::GAIN_DRIFT], vec![0.01]),
+        (vec![Candidate::OUTPUT_DELAY], vec![0.23]),
+        (
+            vec![Candidate::OUTPUT_DELAY, Candidate::PAYLOAD_CHANGE],
+            vec![0.23, 3.3, 0.3, 0.3, -0.04, 0.1],
+        ),
         (vec![Candidate::SLIP], vec![0.05, 0.1]),
         (vec![Candidate::WHEEL_FRICTION], vec![0.03]),
         (vec![Candidate::EFFORT_CLAMP], vec![0.12, 1.3, 0.0]),
@@ -458,4 +463,48 @@ fn a_drift_counts_from_the_drives_start_in_a_window() {
         .map(|k| (off[0][k] - whole[0][start + k]).abs())
         .fold(0.0, f64::max);
     assert!(gap > 1e-3, "counted from the window's start: {gap}");
+}
+
+/// A dead time of the measurements τ_o is one of the commands with the time-varying stages'
+/// clocks moved by τ_o: the outputs with `output_delay` τ_o and a payload change at T are those
+/// with `input_delay` τ_o and the change at T + τ_o, and differ from those with it at T.
+#[test]
+fn an_output_delay_is_an_input_delay_with_the_clocks_moved() {
+    let (tau, ts) = (0.23, 3.3);
+    let after = [0.3, 0.3, -0.04, 0.1];
+    for avg in [false, true] {
+        let rec = recording(avg, 80, |x| {
+            (0.3 + 0.2 * (1.1 * x).sin(), 0.8 * (0.6 * x).cos())
+        });
+        let x0 = [0.1, 0.05];
+        let run = |cands: &[Candidate], p: &[f64]| {
+            let mut th = THETA.to_vec();
+            th.extend_from_slice(p);
+            Extended::new(cands, 0.34)
+                .expect("model")
+                .simulate(&th, &rec, &x0)
+                .expect("sim")
+        };
+        let with = |d: f64, t: f64| [&[d, t][..], &after[..]].concat();
+        let out = run(
+            &[Candidate::OUTPUT_DELAY, Candidate::PAYLOAD_CHANGE],
+            &with(tau, ts),
+        );
+        let moved = run(
+            &[Candidate::INPUT_DELAY, Candidate::PAYLOAD_CHANGE],
+            &with(tau, ts + tau),
+        );
+        let unmoved = run(
+            &[Candidate::INPUT_DELAY, Candidate::PAYLOAD_CHANGE],
+            &with(tau, ts),
+        );
+        let mut apart = 0.0_f64;
+        for ch in 0..2 {
+            for k in 0..rec.len() {
+                approx::assert_abs_diff_eq!(out[ch][k], moved[ch][k], epsilon = 1e-12);
+                apart = apart.max((out[ch][k] - unmoved[ch][k]).abs());
+            }
+        }
+        assert!(apart > 1e-3, "the payload's clock moved: {apart}");
+    }
 }

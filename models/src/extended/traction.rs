@@ -310,7 +310,7 @@ impl Extended {
         let mut setpoint = if ph.accel.is_some() {
             Cmd::at([hold.0, hold.1], [[]; 2], false)
         } else {
-            pipe.target(command(pipe.t0 - ph.delay))
+            pipe.target(command(pipe.t0 - ph.dead_time()))
         };
         let mut z = before.2.gripping((v0, w0));
         let mut y: [Vec<f64>; 2] = [vec![v0], vec![w0]];

@@ -13,6 +13,7 @@
 //! | `tyre_radius_right` | right tyre | its radius × the factor (the host still converts with r) |
 //! | `dry_friction_nm` | wheel joints | Coulomb torque −F·tanh(ω_i/0.01 rad/s) |
 //! | `floor_mu` | floor contact | wheel–floor friction (low: the wheels slip; encoders see the wheels) |
+//! | `sensor_delay_s` | encoders → host | the host reads the encoders' angles and rates as they were `sensor_delay_s` ago (a serial link, a driver's buffer); the true pose is not delayed |
 //! | `payload` | chassis | a body set down at time T and held by a fixed joint ([`super::payload`]) |
 //!
 //! Encoder quantisation, wheel-speed noise and host jitter are [`super::PhysicsSettings`].
@@ -57,6 +58,10 @@ pub struct PhysicsEffects {
     pub floor_mu: Option<f64>,
     /// A payload set down on the chassis mid-run.
     pub payload: Option<Payload>,
+    /// Dead time of the encoders' readings on their way to the host \[s\] (the true pose is
+    /// not delayed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sensor_delay_s: Option<f64>,
 }
 
 impl PhysicsEffects {
@@ -74,6 +79,7 @@ impl PhysicsEffects {
             ("dry_friction", self.dry_friction_nm.is_some()),
             ("floor_mu", self.floor_mu.is_some()),
             ("payload", self.payload.is_some()),
+            ("sensor_delay", self.sensor_delay_s.is_some()),
         ];
         for (name, is) in on {
             if is {
@@ -95,6 +101,7 @@ impl PhysicsEffects {
             _ => Ok(()),
         };
         check("latency_s", self.latency_s, &|x| x >= 0.0)?;
+        check("sensor_delay_s", self.sensor_delay_s, &|x| x >= 0.0)?;
         check("voltage_clamp", self.voltage_clamp, &|x| x > 0.0)?;
         check("gain_sag", self.gain_sag, &|x| (0.0..1.0).contains(&x))?;
         check("gain_decay_tau_s", self.gain_decay_tau_s, &|x| x > 0.0)?;

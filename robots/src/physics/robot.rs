@@ -16,6 +16,9 @@
 //! angle_i  ← angle_i + h (ω_i,old + ω_i,new)/2                               (the encoder's shaft)
 //! ```
 //!
+//! The host reads the encoders' angles and rates as they were a sensor delay ago (none by
+//! default; the last physics step at least that old) and the chassis's true pose as it is.
+//!
 //! A payload effect puts its body on the chassis at the first step at or after its time.
 
 use std::collections::VecDeque;
@@ -60,6 +63,9 @@ pub struct PhysicsRobot {
     /// Reported wheel angles at the last read (for window averages) and its time.
     last_read: Option<(f64, [f64; 2])>,
     payload_placed: bool,
+    /// With a sensor delay: (time \[s\], encoder angles, rates) at every physics step back to
+    /// the delay, oldest first.
+    history: VecDeque<(f64, [f64; 2], [f64; 2])>,
 }
 
 impl std::fmt::Debug for PhysicsRobot {
@@ -102,6 +108,7 @@ impl PhysicsRobot {
             rates,
             last_read: None,
             payload_placed: false,
+            history: VecDeque::from([(0.0, [0.0; 2], rates)]),
         })
     }
 
@@ -123,16 +130,31 @@ impl PhysicsRobot {
         }
     }
 
-    /// What the host sees now: encoder angles, instantaneous wheel rates, the true pose.
+    /// What the host sees now: encoder angles and instantaneous wheel rates (as they were a
+    /// sensor delay ago), the true pose.
     pub(super) fn sample(&self) -> Raw {
         let body = self.engine.body();
+        let (angle, rate) = self.encoder_state();
         Raw {
             t: self.time(),
             command: self.command,
-            angle: self.encoders.read(self.angle),
-            rate: self.rates,
+            angle: self.encoders.read(angle),
+            rate,
             pose: [body.x, body.y, body.heading],
         }
+    }
+
+    /// The encoders' shaft angles and rates the host reads now: the current ones, or with a
+    /// sensor delay those of the last physics step at least that long ago (the first one
+    /// before).
+    fn encoder_state(&self) -> ([f64; 2], [f64; 2]) {
+        let Some(delay) = self.s.effects.sensor_delay_s.filter(|&d| d > 0.0) else {
+            return (self.angle, self.rates);
+        };
+        let at = self.time() - delay + 0.5 * self.p.physics_step_s;
+        let i = self.history.partition_point(|e| e.0 <= at).max(1);
+        let (_, angle, rate) = self.history[i - 1];
+        (angle, rate)
     }
 
     /// Sends `u` at the current sample instant and advances to the next one.
@@ -175,6 +197,14 @@ impl PhysicsRobot {
         }
         self.rates = new;
         self.j += 1;
+        if let Some(delay) = self.s.effects.sensor_delay_s.filter(|&d| d > 0.0) {
+            self.history
+                .push_back((self.time(), self.angle, self.rates));
+            let keep = self.time() - delay - 2.0 * h;
+            while self.history.len() > 1 && self.history[1].0 <= keep {
+                self.history.pop_front();
+            }
+        }
     }
 }
 
