@@ -202,7 +202,7 @@ fn sse_at(windows: &[Windows], lag: f64, skip: (f64, f64)) -> Option<(f64, usize
 /// The lag of the encoders' turn behind a heading measured independently of them, (τ̂ \[s\],
 /// its standard error), from the recordings with such a heading
 /// ([`Recording::independent_heading`]). Over every sample window the heading's turn moved
-/// back by τ is regressed on what the encoders report for the window ([`sse_at`]); τ̂
+/// back by τ is regressed on what the encoders report for the window; τ̂
 /// minimises the sum of squares on a grid of a tenth of a sample period over
 /// [−1 period, [`MAX_LAG_S`]], refined by a parabola, and its standard error is the
 /// Gauss–Newton one, σ̂ / ‖∂r/∂τ‖. `None` without such a heading or where the turns do not
