@@ -808,3 +808,40 @@ fn a_sensor_delay_is_read_off_the_true_heading_under_every_convention() {
         }
     }
 }
+
+/// An amplifier dead band b on the Khepera-like robot's wheel-PD loop: driving straight at a
+/// constant command, each wheel settles where k_P (ω_ref − ω) − b = (k_b + R_a B_e/k_a) ω
+/// (the loop's voltage less the band covers the back-EMF and the viscous loss), 30 % of the
+/// clean robot's voltage taken off by the band: the speed drops by r b/(k_P + c), within 5 %
+/// (0.09 % of the speed: the loop's gain is high, and a band shows in transients and slow
+/// turns rather than in a straight run's speed).
+#[test]
+fn an_amplifier_dead_band_lowers_the_steady_speed_as_the_closed_form_says() {
+    let p = PhysicalProfile::khepera3();
+    let Controller::WheelPd { k_p, .. } = p.controller else {
+        panic!("a wheel-PD profile");
+    };
+    let v_ref = 0.1;
+    let w_ref = v_ref / p.r;
+    let c = p.k_b + p.r_a * p.b_e / p.k_a;
+    let band = 0.3 * c * k_p * w_ref / (k_p + c);
+    let mut s = settings(Timing::Instant, 3.0);
+    let steady = |s: &PhysicsSettings| {
+        let rec = simulate_physics_recording(&p, &constant(v_ref, 0.0), s).expect("simulates");
+        rec.v[rec.len() - 1]
+    };
+    let clean = steady(&s);
+    s.effects.dead_band_v = Some(band);
+    let banded = steady(&s);
+    let want = |b: f64| p.r * (k_p * w_ref - b) / (k_p + c);
+    let (drop, want_drop) = (clean - banded, want(0.0) - want(band));
+    eprintln!(
+        "clean {clean:.7} vs {:.7}; drop {drop:.3e} vs {want_drop:.3e}",
+        want(0.0)
+    );
+    assert!((clean / want(0.0) - 1.0).abs() < 1e-4, "clean {clean}");
+    assert!(
+        (drop / want_drop - 1.0).abs() < 0.05,
+        "drop {drop} vs {want_drop}"
+    );
+}

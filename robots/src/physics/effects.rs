@@ -13,6 +13,7 @@
 //! | `tyre_radius_right` | right tyre | its radius × the factor (the host still converts with r) |
 //! | `dry_friction_nm` | wheel joints | Coulomb torque −F·tanh(ω_i/0.01 rad/s) |
 //! | `floor_mu` | floor contact | wheel–floor friction (low: the wheels slip; encoders see the wheels) |
+//! | `dead_band_v` | amplifier | a voltage asked below `dead_band_v` in size gives none, one above it that much less (before the clamp) |
 //! | `sensor_delay_s` | encoders → host | the host reads the encoders' angles and rates as they were `sensor_delay_s` ago (a serial link, a driver's buffer); the true pose is not delayed |
 //! | `payload` | chassis | a body set down at time T and held by a fixed joint ([`super::payload`]) |
 //!
@@ -58,6 +59,11 @@ pub struct PhysicsEffects {
     pub floor_mu: Option<f64>,
     /// A payload set down on the chassis mid-run.
     pub payload: Option<Payload>,
+    /// Amplifier dead band \[V\]: a voltage asked below it in size gives none, one above it
+    /// that much less (a motor driver's dead band, before the clamp). Not yet in the
+    /// diagnosis harness's list: no candidate models it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dead_band_v: Option<f64>,
     /// Dead time of the encoders' readings on their way to the host \[s\] (the true pose is
     /// not delayed).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -80,6 +86,7 @@ impl PhysicsEffects {
             ("floor_mu", self.floor_mu.is_some()),
             ("payload", self.payload.is_some()),
             ("sensor_delay", self.sensor_delay_s.is_some()),
+            ("dead_band", self.dead_band_v.is_some()),
         ];
         for (name, is) in on {
             if is {
@@ -102,6 +109,7 @@ impl PhysicsEffects {
         };
         check("latency_s", self.latency_s, &|x| x >= 0.0)?;
         check("sensor_delay_s", self.sensor_delay_s, &|x| x >= 0.0)?;
+        check("dead_band_v", self.dead_band_v, &|x| x >= 0.0)?;
         check("voltage_clamp", self.voltage_clamp, &|x| x > 0.0)?;
         check("gain_sag", self.gain_sag, &|x| (0.0..1.0).contains(&x))?;
         check("gain_decay_tau_s", self.gain_decay_tau_s, &|x| x > 0.0)?;
@@ -137,14 +145,17 @@ impl PhysicsEffects {
 
     /// The amplifier's output voltages (right, left) \[V\] for the controller's `u` \[V\] at time
     /// `t` \[s\] of a run of `duration` \[s\]: gain sag (linear, held after the run's end) or
-    /// decay, right-amplifier gain, clamp.
+    /// decay, right-amplifier gain, dead band, clamp.
     pub fn amplify(&self, u: [f64; 2], t: f64, duration: f64) -> [f64; 2] {
         let progress = (t / duration).clamp(0.0, 1.0);
         let sag = (1.0 - self.gain_sag.unwrap_or(0.0) * progress)
             * self.gain_decay_tau_s.map_or(1.0, |tau| (-t / tau).exp());
         let gains = [self.amp_gain_right.unwrap_or(1.0) * sag, sag];
         [0, 1].map(|i| {
-            let x = u[i] * gains[i];
+            let mut x = u[i] * gains[i];
+            if let Some(b) = self.dead_band_v {
+                x = x.signum() * (x.abs() - b).max(0.0);
+            }
             match self.voltage_clamp {
                 Some(c) => x.clamp(-c, c),
                 None => x,
