@@ -136,6 +136,10 @@ pub struct WheelTerms {
     pub right_gain: f64,
     /// Largest |wheel effort| [m/s of rim speed error] (infinite: no clamp).
     pub effort_max: f64,
+    /// Each wheel's dead band [m/s of rim speed error]: an effort e within ±this drives
+    /// nothing, one beyond it drives e ∓ this (a motor driver's dead band; applied before the
+    /// clamp; 0: none).
+    pub effort_dead: f64,
     /// κ relative to the wheel-PD loop's d/2 [-].
     pub mix: f64,
     /// Right wheel's clamped effort's share on the chassis [-]: a larger tyre's 1/ρ, which
@@ -152,6 +156,7 @@ impl Default for WheelTerms {
         Self {
             right_gain: 1.0,
             effort_max: f64::INFINITY,
+            effort_dead: 0.0,
             mix: 1.0,
             right_lever: 1.0,
             derivative: 0.0,

@@ -149,6 +149,7 @@ pub fn friction_loss_per_nm(p: &PhysicalProfile) -> (f64, f64) {
 /// | --- | --- |
 /// | latency | (0.5 + 2.5u) host periods |
 /// | sensor_delay | (0.5 + 2.5u) host periods |
+/// | dead_band | (0.05 + 0.10u) × the median per-period peak voltage ([`Demand`]) |
 /// | rate_limit | (0.2 + 0.3u) × the 95th percentile of the command's slope \|Δu\|/Δ, v and ω alike |
 /// | voltage_clamp | the (0.80 + 0.15u)-quantile of the per-period peak voltage ([`Demand`]; behind a rate limit, under the setpoints it slews): binds in ~5–20 % of the periods |
 /// | gain_sag | fraction 0.1 + 0.2u lost by the run's end |
@@ -169,10 +170,12 @@ pub fn draw_effects(
 ) -> Result<(PhysicsEffects, BTreeMap<String, BTreeMap<String, f64>>)> {
     let mut fx = PhysicsEffects::default();
     let mut params = BTreeMap::new();
-    let need_demand = spec
-        .effects
-        .iter()
-        .any(|e| matches!(*e, "rate_limit" | "voltage_clamp" | "floor_mu"));
+    let need_demand = spec.effects.iter().any(|e| {
+        matches!(
+            *e,
+            "rate_limit" | "voltage_clamp" | "floor_mu" | "dead_band"
+        )
+    });
     let dem = need_demand.then(|| demand(p, exc, spec.duration_s, None));
     // Behind a rate limit a clamp or a floor is drawn from the demand the limit leaves.
     let mut limited: Option<Demand> = None;
@@ -184,7 +187,12 @@ pub fn draw_effects(
         let u = |k| uniform(spec.seed, stream, k);
         let mut m = BTreeMap::new();
         let drawn = match dem.as_ref() {
-            Some(d) if matches!(name, "rate_limit" | "voltage_clamp" | "floor_mu") => {
+            Some(d)
+                if matches!(
+                    name,
+                    "rate_limit" | "voltage_clamp" | "floor_mu" | "dead_band"
+                ) =>
+            {
                 let d = match (name, fx.rate_limit) {
                     ("rate_limit", _) | (_, None) => d,
                     (_, Some(r)) => &*limited.get_or_insert_with(|| {
@@ -203,7 +211,8 @@ pub fn draw_effects(
     Ok((fx, params))
 }
 
-/// Draws a rate limit, voltage clamp or floor friction `name` (table of [`draw_effects`]) from
+/// Draws a rate limit, voltage clamp, dead band or floor friction `name` (table of
+/// [`draw_effects`]) from
 /// the demand `d` (for a clamp or a floor behind a rate limit, the demand the limit leaves) and
 /// the uniform draws `u`, into `fx` and its reported magnitudes `m`; false for another name.
 fn draw_demanded(
@@ -249,6 +258,19 @@ fn draw_demanded(
             m.insert("derivative_s".into(), derivative);
             m.insert("quantile".into(), q);
             m.insert("binds_share".into(), share_above(&d.volts, volts));
+        }
+        "dead_band" => {
+            let frac = 0.05 + 0.10 * u(0);
+            let volts = frac * quantile(&d.volts, 0.5);
+            fx.dead_band_v = Some(volts);
+            m.insert("volts".into(), volts);
+            m.insert("fraction_of_median_peak".into(), frac);
+            // In effort units (as the clamp's): V r/k_P, V/K_PT.
+            let effort = match p.controller {
+                Controller::WheelPd { k_p, .. } => volts * p.r / k_p,
+                Controller::VwPd { k_pt, .. } => volts / k_pt,
+            };
+            m.insert("effort_dead".into(), effort);
         }
         "floor_mu" => {
             let frac = 0.4 + 0.2 * u(0);
@@ -392,6 +414,12 @@ pub fn magnitudes(
                 "latency_s vs delay_s",
                 g("latency_s"),
                 est("delay_s"),
+                false,
+            ),
+            "dead_band" => push(
+                "V r/k_P (V/K_PT) vs effort_dead",
+                g("effort_dead"),
+                est("effort_dead"),
                 false,
             ),
             "sensor_delay" => push(

@@ -75,8 +75,9 @@ pub use report::*;
 /// wheels run ahead of the body at high demand (`traction_limit`; the older setpoint-level
 /// `slip` is still accepted); the encoders' readings reaching the host late (a sensor delay) is
 /// named right only as `output_delay`, which the backend's true heading measures (from the
-/// encoders alone it is a dead time of the commands, `input_delay`).
-pub const TRUTH: [(&str, &[&str]); 11] = [
+/// encoders alone it is a dead time of the commands, `input_delay`); an amplifier's dead band
+/// only as `dead_zone`.
+pub const TRUTH: [(&str, &[&str]); 12] = [
     ("latency", &["input_delay", "latency"]),
     ("rate_limit", &["acceleration_limit"]),
     ("voltage_clamp", &["effort_clamp"]),
@@ -94,6 +95,7 @@ pub const TRUTH: [(&str, &[&str]); 11] = [
     ("floor_mu", &["traction_limit", "slip"]),
     ("payload", &["payload_change"]),
     ("sensor_delay", &["output_delay"]),
+    ("dead_band", &["dead_zone"]),
 ];
 
 /// Pairs of physics effects that move one quantity the encoders see, so that one candidate

@@ -6,6 +6,7 @@
 mod acceleration_limit;
 mod amp_asymmetry;
 mod coulomb_friction;
+mod dead_zone;
 mod effort_clamp;
 mod gain_drift;
 mod input_delay;
@@ -25,6 +26,7 @@ use wheelid_core::{Effect, ParamInfo};
 pub use acceleration_limit::{AccelerationLimit, slew_binding};
 pub use amp_asymmetry::AmpAsymmetry;
 pub use coulomb_friction::CoulombFriction;
+pub use dead_zone::DeadZone;
 pub use effort_clamp::EffortClamp;
 pub use gain_drift::GainDrift;
 pub use input_delay::InputDelay;
@@ -39,7 +41,7 @@ pub use wheel_asymmetry::WheelAsymmetry;
 pub use wheel_friction::WheelFriction;
 
 /// The registry: every built-in effect, in the order the diagnosis reports them.
-pub static EFFECTS: [&dyn Effect; 15] = [
+pub static EFFECTS: [&dyn Effect; 16] = [
     &InputDelay,
     &AccelerationLimit,
     &VelocitySaturation,
@@ -55,6 +57,7 @@ pub static EFFECTS: [&dyn Effect; 15] = [
     &TyreAsymmetry,
     &VwFriction,
     &OutputDelay,
+    &DeadZone,
 ];
 
 /// [`Effect::quantity`] of the effects that make one wheel act weaker than the other
@@ -174,6 +177,8 @@ impl Candidate {
     pub const VW_FRICTION: Candidate = Candidate(&VwFriction);
     /// Dead time of the measurements ([`OutputDelay`]).
     pub const OUTPUT_DELAY: Candidate = Candidate(&OutputDelay);
+    /// Each wheel's dead band ([`DeadZone`]).
+    pub const DEAD_ZONE: Candidate = Candidate(&DeadZone);
 
     /// A candidate for any effect (a built-in one of [`EFFECTS`] or the caller's own).
     pub fn new(effect: &'static dyn Effect) -> Self {

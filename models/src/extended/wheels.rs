@@ -15,7 +15,8 @@
 //!
 //! ```text
 //! diag(θ1 − δ, θ2 − δ) x = Σ_i q_i l_i ē_i + O
-//! e_i = W_i − (δ/l_i) t_iᵀ x,     ē_i = clamp(e_i, −c, c)      (c = `effort_max`)
+//! e_i = W_i − (δ/l_i) t_iᵀ x,     ē_i = clamp(dz(e_i), −c, c)  (c = `effort_max`)
+//! dz(e) = 0 for |e| < β,  e − β sign(e) beyond                  (β = `effort_dead`)
 //! ```
 //!
 //! Where no wheel is clamped this is eq. 2.19 with the wheels' gains, diag(θ1, θ2) x =
@@ -23,7 +24,9 @@
 //! its feedback, so it accelerates the inertia θ − δ, not θ (with δ = 0, a clamp in effort
 //! units comes out c/(1 − δ/θ1): about 10 % high on a Pioneer-like loop, and wrong after a
 //! payload moves θ1). The clamped set C is the one where each clamped wheel's e_i is beyond
-//! ±c and each other one within it (found from the unclamped solution, ≤ 4 passes), and
+//! ±c and each other one within it (found from the unclamped solution, ≤ 4 passes); a wheel
+//! within its dead band is held at 0 with it (its voltage, derivative term and all, is gone),
+//! one beyond it follows with the offset ∓β added to its W_i in b below; and
 //!
 //! ```text
 //! M x = b,   M = diag(θ1 − δ, θ2 − δ) + δ Σ_{i∉C} q_i t_iᵀ,
@@ -96,9 +99,10 @@ pub(super) fn wheel_force(
     th: [f64; 2],
 ) -> WheelForce {
     let delta = wt.derivative.min(MAX_DERIVATIVE_SHARE * th[0].min(th[1]));
-    if delta > 0.0 && wt.effort_max.is_finite() {
+    if delta > 0.0 && (wt.effort_max.is_finite() || wt.effort_dead > 0.0) {
         let free = WheelTerms {
             effort_max: f64::INFINITY,
+            effort_dead: 0.0,
             ..*wt
         };
         let unclamped = proportional(&free, g, e);
@@ -111,21 +115,52 @@ pub(super) fn wheel_force(
     proportional(wt, g, e)
 }
 
-/// The wheels' efforts without a derivative term (δ = 0): each wheel's effort clamped as it is
-/// (module docs with δ = 0), Δ = Ē − E, depending on E only.
+/// What a wheel's effort does at voltage (effort) `e`: follows it less the dead band
+/// (`Follow(offset)`, the offset ∓β), or is held at a value (`Held`: 0 within the band, ±c
+/// at the clamp), for dead band β = `wt.effort_dead` and clamp c = `wt.effort_max`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Wheel {
+    Follow(f64),
+    Held(f64),
+}
+
+impl Wheel {
+    fn of(wt: &WheelTerms, e: f64) -> Self {
+        let (b, cl) = (wt.effort_dead, wt.effort_max);
+        if e.abs() < b {
+            Wheel::Held(0.0)
+        } else if e.abs() - b >= cl {
+            Wheel::Held(cl.copysign(e))
+        } else {
+            Wheel::Follow(-b.copysign(e))
+        }
+    }
+
+    /// The effort it drives at voltage `e`.
+    fn effort(self, e: f64) -> f64 {
+        match self {
+            Wheel::Follow(off) => e + off,
+            Wheel::Held(c) => c,
+        }
+    }
+}
+
+/// The wheels' efforts without a derivative term (δ = 0): each wheel's effort less its dead
+/// band and clamped as it is (module docs with δ = 0), Δ = Ē − E, depending on E only.
 pub(super) fn proportional(wt: &WheelTerms, g: f64, e: [f64; 2]) -> WheelForce {
-    let (gain, cl, kappa, lever) = (wt.right_gain, wt.effort_max, wt.mix, wt.right_lever);
+    let (gain, kappa, lever) = (wt.right_gain, wt.mix, wt.right_lever);
     let wheels = [gain * (e[0] + kappa * e[1]), e[0] - kappa * e[1]];
-    let clamped = [lever * wheels[0].clamp(-cl, cl), wheels[1].clamp(-cl, cl)];
+    let states = wheels.map(|w| Wheel::of(wt, w));
+    let clamped = [
+        lever * states[0].effort(wheels[0]),
+        states[1].effort(wheels[1]),
+    ];
     let ev = 0.5 * (clamped[0] + clamped[1]);
     let ew = (clamped[0] - clamped[1]) / (2.0 * kappa);
-    // Each wheel's slope on its own error: its gain where it follows, 0 where it is clamped.
-    let [fr, fl] = [0, 1].map(|i| {
-        if wheels[i].abs() < cl {
-            [gain * lever, 1.0][i]
-        } else {
-            0.0
-        }
+    // Each wheel's slope on its own error: its gain where it follows, 0 where it is held.
+    let [fr, fl] = [0, 1].map(|i| match states[i] {
+        Wheel::Follow(_) => [gain * lever, 1.0][i],
+        Wheel::Held(_) => 0.0,
     });
     let (sum, diff) = (0.5 * (fr + fl), 0.5 * (fr - fl));
     let dx = [
@@ -147,10 +182,9 @@ fn wheel(wt: &WheelTerms, i: usize) -> (f64, f64, [f64; 2], [f64; 2]) {
     (gain, lever, [1.0, s * k], [0.5, s * 0.5 / k])
 }
 
-/// The clamped set (each wheel: `None` where it follows, its clamped effort ±c where clamped)
-/// from the unclamped accelerations `x0`: the wheels whose voltage e_i leaves ±c, then passes
-/// until each clamped wheel's e_i is beyond c and each other one's within it (≤ 4); `None`
-/// where no wheel is clamped.
+/// The clamped set (each wheel's [`Wheel`] state) from the unclamped accelerations `x0`:
+/// each wheel's state at its voltage e_i, then passes until every state is its voltage's
+/// (≤ 4); `None` where every wheel follows its voltage whole.
 fn clamped_set(
     wt: &WheelTerms,
     e: [f64; 2],
@@ -158,38 +192,28 @@ fn clamped_set(
     th: [f64; 2],
     delta: f64,
     x0: [f64; 2],
-) -> Option<[Option<f64>; 2]> {
-    let cl = wt.effort_max;
+) -> Option<[Wheel; 2]> {
     let voltage = |i: usize, x: [f64; 2]| {
         let (gain, lever, t, _) = wheel(wt, i);
         let w = gain * (e[0] + t[1] * e[1]);
         w - delta / lever * (t[0] * x[0] + t[1] * x[1])
     };
-    let mut set = [None; 2];
+    let whole = [Wheel::Follow(0.0); 2];
+    let mut set = whole;
     let mut x = x0;
     for _ in 0..4 {
-        let mut changed = false;
-        for (i, s) in set.iter_mut().enumerate() {
-            let ei = voltage(i, x);
-            match *s {
-                None if ei.abs() > cl => {
-                    *s = Some(cl.copysign(ei));
-                    changed = true;
-                }
-                Some(c) if ei * c.signum() < cl => {
-                    *s = None;
-                    changed = true;
-                }
-                _ => {}
-            }
+        let next = [0, 1].map(|i| Wheel::of(wt, voltage(i, x)));
+        if next == set {
+            break;
         }
-        if !changed || set == [None, None] {
+        set = next;
+        if set == whole {
             break;
         }
         let (m, b, _) = system(wt, e, others, th, delta, &set);
         x = apply(&inverse(&m), b);
     }
-    (set != [None, None]).then_some(set)
+    (set != whole).then_some(set)
 }
 
 /// M, b and B (module docs) for the clamped set `set`.
@@ -199,21 +223,21 @@ fn system(
     others: &Others,
     th: [f64; 2],
     delta: f64,
-    set: &[Option<f64>; 2],
+    set: &[Wheel; 2],
 ) -> (M2, [f64; 2], M2) {
     let mut m = [[th[0] - delta, 0.0], [0.0, th[1] - delta]];
     let mut b = others.o;
     let mut bu = [[0.0; 2]; 2];
     for (i, s) in set.iter().enumerate() {
         let (gain, lever, t, q) = wheel(wt, i);
-        match s {
-            Some(c) => {
+        match *s {
+            Wheel::Held(c) => {
                 for r in 0..2 {
                     b[r] += q[r] * lever * c;
                 }
             }
-            None => {
-                let w = gain * (e[0] + t[1] * e[1]);
+            Wheel::Follow(off) => {
+                let w = gain * (e[0] + t[1] * e[1]) + off;
                 for r in 0..2 {
                     b[r] += q[r] * lever * w;
                     for k in 0..2 {
@@ -236,7 +260,7 @@ fn derivative_clamped(
     others: &Others,
     th: [f64; 2],
     delta: f64,
-    set: [Option<f64>; 2],
+    set: [Wheel; 2],
 ) -> WheelForce {
     let (m, b, bu) = system(wt, e, others, th, delta, &set);
     let minv = inverse(&m);
@@ -286,6 +310,7 @@ mod tests {
         let wt = WheelTerms {
             right_gain: 0.95,
             effort_max: cl,
+            effort_dead: 0.0,
             mix: 0.14,
             right_lever: 1.0 / 1.03,
             derivative: delta,

@@ -60,8 +60,7 @@ pub struct PhysicsEffects {
     /// A payload set down on the chassis mid-run.
     pub payload: Option<Payload>,
     /// Amplifier dead band \[V\]: a voltage asked below it in size gives none, one above it
-    /// that much less (a motor driver's dead band, before the clamp). Not yet in the
-    /// diagnosis harness's list: no candidate models it.
+    /// that much less (a motor driver's dead band, before the clamp).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub dead_band_v: Option<f64>,
     /// Dead time of the encoders' readings on their way to the host \[s\] (the true pose is
