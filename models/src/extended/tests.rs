@@ -122,6 +122,45 @@ fn effort_clamp_matches_its_closed_form() {
     }
 }
 
+/// A dead band β on a straight command u from rest (both wheels' efforts u − v − δ v̇ beyond
+/// it): θ1 v̇ = u − β − θ4 v, v = (u − β)/θ4 (1 − e^(−θ4 t/θ1)), whether or not the loop has
+/// a derivative term δ (a wheel beyond its band keeps it); a command within the band does not
+/// move the robot.
+#[test]
+fn a_dead_band_matches_its_closed_form() {
+    let (u, beta, track) = (0.4, 0.07, 0.3);
+    // 1.2 s: the efforts stay beyond the band (with θ4 < 1 the steady effort u − v falls
+    // inside it, past 1.4 s).
+    let rec = recording(false, 13, |_| (u, 0.0));
+    let cases: [(&[Candidate], Vec<f64>); 2] = [
+        (&[Candidate::DEAD_ZONE], vec![beta]),
+        // A clamp no effort reaches, with its derivative term.
+        (
+            &[Candidate::EFFORT_CLAMP, Candidate::DEAD_ZONE],
+            vec![100.0, 1.0, 0.05, beta],
+        ),
+    ];
+    for (cands, extra) in cases {
+        let e = Extended::new(cands, track).expect("model");
+        let mut th = THETA.to_vec();
+        th.extend(&extra);
+        let [v, w] = <[Vec<f64>; 2]>::try_from(e.simulate(&th, &rec, &[0.0, 0.0]).expect("sim"))
+            .expect("two channels");
+        for (k, vk) in v.iter().enumerate() {
+            let want = (u - beta) / THETA[3] * (1.0 - (-THETA[3] * rec.t[k] / THETA[0]).exp());
+            approx::assert_abs_diff_eq!(*vk, want, epsilon = 1e-7);
+            approx::assert_abs_diff_eq!(w[k], 0.0, epsilon = 1e-12);
+        }
+        let within = recording(false, 11, |_| (0.5 * beta, 0.0));
+        let y = e.simulate(&th, &within, &[0.0, 0.0]).expect("sim");
+        assert!(
+            y[0].iter().all(|x| x.abs() < 1e-12),
+            "{cands:?}: {:?}",
+            y[0]
+        );
+    }
+}
+
 /// A right wheel with effort gain a on a straight command u: the steady state solves
 /// 0 = ((a+1)/2) E_v + ((a−1)/2) κ E_ω − (θ4 − 1) v and
 /// 0 = ((a−1)/(2κ)) E_v + ((a+1)/2) E_ω − (θ6 − 1) ω, E_v = u − v, E_ω = −ω (θ3 = θ5 = 0):
@@ -207,6 +246,11 @@ fn analytic_sensitivities_match_central_differences_with_every_candidate() {
         ),
         (vec![Candidate::GAIN_DRIFT], vec![0.01]),
         (vec![Candidate::OUTPUT_DELAY], vec![0.23]),
+        (vec![Candidate::DEAD_ZONE], vec![0.05]),
+        (
+            vec![Candidate::EFFORT_CLAMP, Candidate::DEAD_ZONE],
+            vec![0.12, 1.3, 0.03, 0.02],
+        ),
         (
             vec![Candidate::OUTPUT_DELAY, Candidate::PAYLOAD_CHANGE],
             vec![0.23, 3.3, 0.3, 0.3, -0.04, 0.1],
