@@ -855,3 +855,27 @@ fn a_sensor_delay_is_named_output_delay_where_a_true_heading_shows_it() {
     assert!((tin / latency - 1.0).abs() < 0.1, "input_delay {tin}");
     assert!((tout / sensor - 1.0).abs() < 0.1, "output_delay {tout}");
 }
+
+/// An amplifier dead band on each robot (seed 1302, first run with the `dead_zone` effect):
+/// a voltage below the band gives none, one above it that much less. Named `dead_zone` and
+/// nothing else — not `wheel_friction`, whose steady offset it shares — with the band within
+/// 10 % of V r/k_P (wheel PD) or V/K_PT (v/ω PD), the clamp's effort units.
+#[test]
+fn an_amplifier_dead_band_is_named_dead_zone() {
+    for (p, effort) in [
+        (PhysicalProfile::khepera3(), 0.004),
+        (PhysicalProfile::pioneer3dx(), 0.008),
+    ] {
+        let volts = match p.controller {
+            Controller::WheelPd { k_p, .. } => effort * k_p / p.r,
+            Controller::VwPd { k_pt, .. } => effort * k_pt,
+        };
+        let d = diagnosed(&p, 1302, |s| s.effects.dead_band_v = Some(volts));
+        let beta = named_param(&d, "dead_zone", "effort_dead").expect("band");
+        println!(
+            "{}: effort_dead {beta:.5} vs {effort:.5} ({volts:.3} V)",
+            p.name
+        );
+        assert!((beta / effort - 1.0).abs() < 0.1, "{}: {beta}", p.name);
+    }
+}
