@@ -92,7 +92,10 @@
 # clean 5071-5170 once at b63c762 (1062-1063 partly run at 3238b24 first, stopped unread);
 # 1067-1071 (single, clean; pairs window_end) and clean 5171-5270 once at 0abfd4c (1067-1068
 # partly run at f1f3d2d first, stopped unread), then 1072-1076 (single, clean; pairs
-# window_end) once at 0abfd4c; the next report takes 1077.. and 5271.. .
+# window_end) once at 0abfd4c; 1077-1080 (single, clean; pairs window_end) once at 9632cd6
+# (0abfd4c's method, the load transfer's reference corrected; the ten effects of then), a
+# report of the magnitudes; the sensor delay and the dead band joined the harness after it
+# (3bb3fbb, 960e494): the next report takes 1081.. and 5271.. .
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
@@ -105,7 +108,7 @@
 #
 # Cost: a run is one physics simulation (~3-7 s for 60 s of the Khepera-like robot or 120 s of
 # the Pioneer-like one) plus the diagnosis (mostly < 1 s); a clean twin per seed is simulated
-# once more to measure how visible each effect is. `--cases all` is 1 clean + 10 single + 45
+# once more to measure how visible each effect is. `--cases all` is 1 clean + 12 single + 66
 # pair runs per (profile, convention, seed).
 set -euo pipefail
 cd "$(dirname "$0")/.."
