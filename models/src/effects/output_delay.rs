@@ -40,6 +40,12 @@ pub const MAX_LAG_S: f64 = 1.0;
 /// [`super::MEASURED_Z`]).
 pub const LAG_Z: f64 = 4.0;
 
+/// Robust standard deviations beyond which a window's residual is dropped ([`trim`]).
+const TRIM_Z: f64 = 2.5;
+
+/// Passes of [`trim`].
+const TRIMS: usize = 3;
+
 /// Steps of the lag grid per sample period (then a parabola through the best three).
 const GRID_PER_PERIOD: f64 = 10.0;
 
@@ -117,6 +123,8 @@ struct Windows {
     ends: Vec<(f64, f64)>,
     t: Vec<f64>,
     turn: Vec<f64>,
+    /// The windows the regression uses (all, until [`trim`] drops the outliers).
+    keep: Vec<bool>,
 }
 
 impl Windows {
@@ -147,6 +155,7 @@ impl Windows {
             ends.push((r.t[k - 1], r.t[k]));
         }
         Some(Self {
+            keep: vec![true; cols.len()],
             cols,
             ends,
             t: r.t.clone(),
@@ -167,19 +176,27 @@ impl Windows {
     }
 }
 
-/// Least squares of the heading's turn over each window moved back by `lag` on the encoders'
-/// (∫ω dt, ∫v dt) of that window (no intercept; the v column takes a larger tyre's share):
-/// (sum of squares, windows), over the windows whose moved ends lie inside the recording
-/// after `skip.0` \[s\] and before `skip.1` \[s\] from its end (the same windows for every lag).
-fn sse_at(windows: &[Windows], lag: f64, skip: (f64, f64)) -> Option<(f64, usize)> {
+/// The windows of `w` used at any lag: kept, their moved ends inside the recording after
+/// `skip.0` \[s\] and before `skip.1` \[s\] from its end (the same windows for every lag).
+fn used(w: &Windows, skip: (f64, f64)) -> impl Iterator<Item = usize> + '_ {
+    let (first, last) = (w.t[0] + skip.0, w.t[w.t.len() - 1] - skip.1);
+    (0..w.cols.len()).filter(move |&k| w.keep[k] && w.ends[k].0 >= first && w.ends[k].1 <= last)
+}
+
+/// The heading's turn over window `k` of `w` moved back by `lag`.
+fn moved_turn(w: &Windows, k: usize, lag: f64) -> Option<f64> {
+    let (a, b) = w.ends[k];
+    Some(w.at(b - lag)? - w.at(a - lag)?)
+}
+
+/// Least squares of the heading's turn over each used window moved back by `lag` on the
+/// encoders' (∫ω dt, ∫v dt) of that window (no intercept; the v column takes a larger tyre's
+/// share): (sum of squares, windows, coefficients).
+fn fit_at(windows: &[Windows], lag: f64, skip: (f64, f64)) -> Option<(f64, usize, [f64; 2])> {
     let (mut xtx, mut xty, mut yty, mut n) = ([[0.0; 2]; 2], [0.0; 2], 0.0, 0usize);
     for w in windows {
-        let (first, last) = (w.t[0] + skip.0, w.t[w.t.len() - 1] - skip.1);
-        for (x, &(a, b)) in w.cols.iter().zip(&w.ends) {
-            if a < first || b > last {
-                continue;
-            }
-            let y = w.at(b - lag)? - w.at(a - lag)?;
+        for k in used(w, skip) {
+            let (x, y) = (w.cols[k], moved_turn(w, k, lag)?);
             for i in 0..2 {
                 xty[i] += x[i] * y;
                 for j in 0..2 {
@@ -196,7 +213,60 @@ fn sse_at(windows: &[Windows], lag: f64, skip: (f64, f64)) -> Option<(f64, usize
     }
     let a = (xtx[1][1] * xty[0] - xtx[0][1] * xty[1]) / det;
     let b = (xtx[0][0] * xty[1] - xtx[1][0] * xty[0]) / det;
-    Some(((yty - a * xty[0] - b * xty[1]).max(0.0), n))
+    Some(((yty - a * xty[0] - b * xty[1]).max(0.0), n, [a, b]))
+}
+
+/// The lag on `lags` (spaced `step`) with the least sum of squares, refined by a parabola
+/// through it and its neighbours.
+fn grid_min(windows: &[Windows], lags: &[f64], step: f64, skip: (f64, f64)) -> Option<f64> {
+    let sse: Vec<f64> = lags
+        .iter()
+        .map(|&l| fit_at(windows, l, skip).map(|s| s.0))
+        .collect::<Option<_>>()?;
+    let best = (0..sse.len()).min_by(|&a, &b| sse[a].total_cmp(&sse[b]))?;
+    if best == 0 || best + 1 == sse.len() {
+        return Some(lags[best]);
+    }
+    let (a, b, c) = (sse[best - 1], sse[best], sse[best + 1]);
+    let curv = a - 2.0 * b + c;
+    Some(
+        lags[best]
+            + if curv > 0.0 {
+                0.5 * step * (a - c) / curv
+            } else {
+                0.0
+            },
+    )
+}
+
+/// Drops from the regression the windows whose residual at `lag` is beyond [`TRIM_Z`] robust
+/// standard deviations (1.4826 × the median absolute residual): where the wheels slip, the
+/// encoders' turn runs ahead of the body's, and those windows would pull the lag negative.
+fn trim(windows: &mut [Windows], lag: f64, skip: (f64, f64)) -> Option<()> {
+    let (_, _, [a, b]) = fit_at(windows, lag, skip)?;
+    let resid = |w: &Windows, k: usize| {
+        moved_turn(w, k, lag).map(|y| y - a * w.cols[k][0] - b * w.cols[k][1])
+    };
+    let mut abs: Vec<f64> = windows
+        .iter()
+        .flat_map(|w| {
+            used(w, skip)
+                .filter_map(|k| resid(w, k))
+                .collect::<Vec<_>>()
+        })
+        .map(f64::abs)
+        .collect();
+    abs.sort_by(f64::total_cmp);
+    let limit = TRIM_Z * 1.4826 * *abs.get(abs.len() / 2)?;
+    for w in windows.iter_mut() {
+        let out: Vec<usize> = used(w, skip)
+            .filter(|&k| resid(w, k).is_none_or(|r| r.abs() > limit))
+            .collect();
+        for k in out {
+            w.keep[k] = false;
+        }
+    }
+    Some(())
 }
 
 /// The lag of the encoders' turn behind a heading measured independently of them, (τ̂ \[s\],
@@ -204,11 +274,12 @@ fn sse_at(windows: &[Windows], lag: f64, skip: (f64, f64)) -> Option<(f64, usize
 /// ([`Recording::independent_heading`]). Over every sample window the heading's turn moved
 /// back by τ is regressed on what the encoders report for the window; τ̂
 /// minimises the sum of squares on a grid of a tenth of a sample period over
-/// [−1 period, [`MAX_LAG_S`]], refined by a parabola, and its standard error is the
+/// [−1 period, [`MAX_LAG_S`]], refined by a parabola, then once more without the windows
+/// whose residual is an outlier (slipping wheels), and its standard error is the
 /// Gauss–Newton one, σ̂ / ‖∂r/∂τ‖. `None` without such a heading or where the turns do not
 /// determine the regression (no turning).
 pub fn heading_lag(recordings: &[Recording]) -> Option<(f64, f64)> {
-    let windows: Vec<Windows> = recordings.iter().filter_map(Windows::of).collect();
+    let mut windows: Vec<Windows> = recordings.iter().filter_map(Windows::of).collect();
     let first = windows.first()?;
     let period = (first.t[first.t.len() - 1] - first.t[0]) / (first.t.len().max(2) - 1) as f64;
     if period.is_nan() || period <= 0.0 {
@@ -220,29 +291,17 @@ pub fn heading_lag(recordings: &[Recording]) -> Option<(f64, f64)> {
         .map(|i| -period + i as f64 * step)
         .take_while(|&l| l <= MAX_LAG_S + 1e-12)
         .collect();
-    let sse: Vec<f64> = lags
-        .iter()
-        .map(|&l| sse_at(&windows, l, skip).map(|s| s.0))
-        .collect::<Option<_>>()?;
-    let best = (0..sse.len()).min_by(|&a, &b| sse[a].total_cmp(&sse[b]))?;
-    let lag = if best == 0 || best + 1 == sse.len() {
-        lags[best]
-    } else {
-        let (a, b, c) = (sse[best - 1], sse[best], sse[best + 1]);
-        let curv = a - 2.0 * b + c;
-        lags[best]
-            + if curv > 0.0 {
-                0.5 * step * (a - c) / curv
-            } else {
-                0.0
-            }
-    };
-    let (s0, n) = sse_at(&windows, lag, skip)?;
+    let mut lag = grid_min(&windows, &lags, step, skip)?;
+    for _ in 0..TRIMS {
+        trim(&mut windows, lag, skip)?;
+        lag = grid_min(&windows, &lags, step, skip)?;
+    }
+    let (s0, n, _) = fit_at(&windows, lag, skip)?;
     // ‖∂r/∂τ‖² from the sum of squares' curvature: SSE(τ ± h) ≈ SSE(τ) + h² ‖∂r/∂τ‖².
     let h = 0.5 * step;
     let (sp, sm) = (
-        sse_at(&windows, lag + h, skip)?.0,
-        sse_at(&windows, lag - h, skip)?.0,
+        fit_at(&windows, lag + h, skip)?.0,
+        fit_at(&windows, lag - h, skip)?.0,
     );
     let grad2 = (0.5 * (sp + sm) - s0) / (h * h);
     let sigma2 = s0 / (n - 3) as f64;
