@@ -34,7 +34,7 @@ static PARAMS: [ParamInfo; 1] = [ParamInfo {
 const MIN_COMMAND_SHARE: f64 = 0.002;
 
 /// Each wheel's dead band β ≥ 0 [m/s] (`Terms::wheels`); null 0; plausible from
-/// [`MIN_COMMAND_SHARE`] up to half of the largest forward command; needs the wheel track.
+/// 0.2 % up to half of the largest forward command; needs the wheel track.
 #[derive(Debug, Clone, Copy)]
 pub struct DeadZone;
 
@@ -125,7 +125,9 @@ mod tests {
         };
         let top = fit.command_max(0);
         assert!((top - 0.5).abs() < 1e-3, "{top}");
-        let small = DeadZone.plausible(0, 0.0005, 1e-5, &fit).expect_err("0.1 %");
+        let small = DeadZone
+            .plausible(0, 0.0005, 1e-5, &fit)
+            .expect_err("0.1 %");
         assert!(small.contains("under 0.2 %"), "{small}");
         assert!(DeadZone.plausible(0, 0.003, 1e-5, &fit).is_ok());
         assert!(DeadZone.plausible(0, 0.3, 1e-5, &fit).is_err());
