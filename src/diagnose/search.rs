@@ -872,9 +872,9 @@ mod tests {
         }
     }
 
-    /// Alternatives: the three wheel imbalances, the three dry frictions and the two floor slips
-    /// are one quantity each; different physics, and effects of their own quantity (None), are
-    /// not, not even with themselves.
+    /// Alternatives: the three wheel imbalances, the three dry frictions, the two floor slips
+    /// and the two dead times are one quantity each; different physics, and effects of their
+    /// own quantity (None), are not, not even with themselves.
     #[test]
     fn effects_of_one_quantity_are_alternatives() {
         use Candidate as C;
@@ -882,6 +882,7 @@ mod tests {
             &[C::WHEEL_ASYMMETRY, C::AMP_ASYMMETRY, C::TYRE_ASYMMETRY][..],
             &[C::COULOMB_FRICTION, C::WHEEL_FRICTION, C::VW_FRICTION],
             &[C::SLIP, C::TRACTION_LIMIT],
+            &[C::INPUT_DELAY, C::OUTPUT_DELAY],
         ];
         for (g, group) in groups.iter().enumerate() {
             for &a in *group {
@@ -895,7 +896,7 @@ mod tests {
             }
         }
         for own in [
-            C::INPUT_DELAY,
+            C::DEAD_ZONE,
             C::EFFORT_CLAMP,
             C::GAIN_DRIFT,
             C::PAYLOAD_CHANGE,

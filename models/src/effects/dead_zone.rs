@@ -17,7 +17,7 @@
 //! nonlinearity of actuators, G. Tao & P. V. Kokotović, *Adaptive control of systems with
 //! actuator and sensor nonlinearities* (Wiley, 1996), ch. 2.
 
-use wheelid_core::effect::{FitData, Probe, ProbeData, Search, Terms, abs_quantile, significant};
+use wheelid_core::effect::{FitData, Probe, ProbeData, Search, Terms, significant};
 use wheelid_core::{Effect, EffectChannels, ParamInfo, Result, WheelTerms};
 
 static PARAMS: [ParamInfo; 1] = [ParamInfo {
@@ -57,11 +57,8 @@ impl Effect for DeadZone {
     fn search(&self) -> Search {
         Search::Smooth
     }
-    /// A step of 10⁻³ of the forward command's 90 % quantile (as `wheel_friction`'s).
     fn probe(&self, data: &ProbeData<'_>) -> Option<Probe> {
-        data.track?;
-        let step = 1e-3 * abs_quantile(data.command(0), 0.9).max(1e-4);
-        Some(Probe::Gradient(vec![(0, step)]))
+        super::wheel_friction::per_wheel_probe(data)
     }
     fn evidence(&self) -> &'static str {
         "the residual opposes each wheel's effort"

@@ -37,6 +37,15 @@ pub(super) fn directions(v: f64, w: f64, track: f64) -> [f64; 4] {
     [tr, tl, (1.0 - tr * tr) / EPS, (1.0 - tl * tl) / EPS]
 }
 
+/// The probe of a per-wheel offset in wheel rim speed units whose null is 0 (`wheel_friction`,
+/// `dead_zone`): a step of 10⁻³ of the forward command's 90 % quantile; `None` without the
+/// wheel track.
+pub(super) fn per_wheel_probe(data: &ProbeData<'_>) -> Option<Probe> {
+    data.track?;
+    let step = 1e-3 * abs_quantile(data.command(0), 0.9).max(1e-4);
+    Some(Probe::Gradient(vec![(0, step)]))
+}
+
 /// Dry friction per wheel c ≥ 0 (a [`Force`]); null 0; plausible up to half the largest
 /// wheel command; needs the wheel track.
 #[derive(Debug, Clone, Copy)]
@@ -58,11 +67,8 @@ impl Effect for WheelFriction {
     fn bounds(&self, _t_range: (f64, f64)) -> Vec<(f64, f64)> {
         vec![(0.0, f64::INFINITY)]
     }
-    /// A step of 10⁻³ of the forward command's 90 % quantile.
     fn probe(&self, data: &ProbeData<'_>) -> Option<Probe> {
-        data.track?;
-        let step = 1e-3 * abs_quantile(data.command(0), 0.9).max(1e-4);
-        Some(Probe::Gradient(vec![(0, step)]))
+        per_wheel_probe(data)
     }
     fn evidence(&self) -> &'static str {
         "the residual opposes each wheel's direction of turning"
