@@ -346,30 +346,43 @@ pub fn power_quantile_hz_with(
     fraction: f64,
 ) -> Option<f64> {
     let n = x.len();
-    if n < 4 {
-        return None;
-    }
-    let mean = x.iter().sum::<f64>() / n as f64;
-    let mut input: Vec<f64> = x.iter().map(|v| v - mean).collect();
-    // The real-input transform: bins 0 … ⌊n/2⌋ of the full one, at half its work and memory.
-    let r2c = planner.plan_fft_forward(n);
-    let mut spectrum = r2c.make_output_vec();
-    r2c.process(&mut input, &mut spectrum).ok()?;
-    drop(input);
-    let half = n / 2;
-    let power = || spectrum[1..=half].iter().map(|c| c.norm_sqr());
-    let total: f64 = power().sum();
+    let power = periodogram_with(planner, x)?;
+    let total: f64 = power[1..].iter().sum();
     if total <= f64::MIN_POSITIVE * n as f64 || !total.is_finite() {
         return None;
     }
     let mut acc = 0.0;
-    for (k, p) in power().enumerate() {
+    for (k, p) in power[1..].iter().enumerate() {
         acc += p;
         if acc >= fraction * total {
             return Some((k + 1) as f64 * fs_hz / n as f64);
         }
     }
     Some(fs_hz / 2.0)
+}
+
+/// The periodogram of the mean-removed signal `x`: |X_k|² for k = 0 … ⌊n/2⌋, where
+/// X_k = Σ_t (x_t − x̄) e^(−2πi k t / n) (unnormalised); bin k lies at k fs / n Hz. `None` for
+/// fewer than 4 samples.
+///
+/// The real-input transform gives bins 0 … ⌊n/2⌋ of the full one at half its work and memory.
+pub fn periodogram(x: &[f64]) -> Option<Vec<f64>> {
+    periodogram_with(&mut realfft::RealFftPlanner::new(), x)
+}
+
+/// [`periodogram`] with the transforms of `planner` (kept for the next signal of the same
+/// length).
+pub fn periodogram_with(planner: &mut realfft::RealFftPlanner<f64>, x: &[f64]) -> Option<Vec<f64>> {
+    let n = x.len();
+    if n < 4 {
+        return None;
+    }
+    let mean = x.iter().sum::<f64>() / n as f64;
+    let mut input: Vec<f64> = x.iter().map(|v| v - mean).collect();
+    let r2c = planner.plan_fft_forward(n);
+    let mut spectrum = r2c.make_output_vec();
+    r2c.process(&mut input, &mut spectrum).ok()?;
+    Some(spectrum.iter().map(|c| c.norm_sqr()).collect())
 }
 
 #[cfg(test)]
@@ -438,5 +451,29 @@ mod tests {
         let f = power_quantile_hz(&x, fs, 0.95).expect("non-constant");
         approx::assert_abs_diff_eq!(f, 0.5, epsilon = 0.011);
         assert_eq!(power_quantile_hz(&[1.0; 100], fs, 0.95), None);
+    }
+
+    #[test]
+    fn periodogram_of_a_cosine_on_a_bin_is_its_closed_form() {
+        // A cos(2π k0 t / n) + c over n samples: |X_k0|² = (A n / 2)², every other bin 0 (the
+        // mean c removed), ⌊n/2⌋ + 1 bins for odd and even n.
+        for n in [512usize, 501] {
+            let (a, k0, c) = (1.5, 37usize, 4.0);
+            let x: Vec<f64> = (0..n)
+                .map(|t| a * (2.0 * std::f64::consts::PI * (k0 * t) as f64 / n as f64).cos() + c)
+                .collect();
+            let p = periodogram(&x).expect("long enough");
+            assert_eq!(p.len(), n / 2 + 1);
+            let peak = (a * n as f64 / 2.0).powi(2);
+            approx::assert_relative_eq!(p[k0], peak, max_relative = 1e-12);
+            let rest: f64 = p
+                .iter()
+                .enumerate()
+                .filter(|(k, _)| *k != k0)
+                .map(|(_, v)| v)
+                .sum();
+            assert!(rest < 1e-18 * peak, "leak {rest:e}");
+        }
+        assert_eq!(periodogram(&[1.0, 2.0, 3.0]), None);
     }
 }

@@ -128,19 +128,15 @@ fn quantile(x: &[f64], q: f64) -> f64 {
 
 /// Power per band of a series sampled every `dt` (periodogram).
 fn band_power(x: &[f64], dt: f64) -> Vec<f64> {
-    use rustfft::{FftPlanner, num_complex::Complex};
     let n = x.len();
     let mut out = vec![0.0; BANDS.len()];
-    if n < 4 {
+    let Some(power) = wheelid_core::signal::periodogram(x) else {
         return out;
-    }
-    let m = x.iter().sum::<f64>() / n as f64;
-    let mut buf: Vec<Complex<f64>> = x.iter().map(|v| Complex::new(v - m, 0.0)).collect();
-    FftPlanner::new().plan_fft_forward(n).process(&mut buf);
-    for (k, z) in buf.iter().enumerate().take(n / 2 + 1).skip(1) {
+    };
+    for (k, p) in power.iter().enumerate().skip(1) {
         let f = k as f64 / (n as f64 * dt);
         let b = BANDS.iter().rposition(|&lo| f >= lo).unwrap_or(0);
-        out[b] += z.norm_sqr();
+        out[b] += p;
     }
     out
 }
