@@ -41,11 +41,8 @@ fn drive(
     duration_s: f64,
     wheel_noise: f64,
 ) -> (Vec<Vec<f64>>, [f64; 2]) {
-    // The seeds on the pool's threads (in order): the longest test of the binary otherwise
-    // runs alone on one core at its end.
-    use rayon::prelude::*;
-    let runs: Vec<(Vec<f64>, [f64; 2])> = (first_seed()..first_seed() + seeds())
-        .into_par_iter()
+    let mut extent = [0.0f64; 2];
+    let thetas = (first_seed()..first_seed() + seeds())
         .map(|seed| {
             let s = PhysicsSettings {
                 duration_s,
@@ -56,20 +53,16 @@ fn drive(
             };
             let rec = simulate_physics_recording(p, exc, &s).expect("simulates");
             let (x, y) = (rec.x.as_ref().expect("pose"), rec.y.as_ref().expect("pose"));
-            let mut extent = [0.0f64; 2];
             for (a, b) in x.iter().zip(y) {
                 extent = [
                     extent[0].max((a - x[0]).abs()),
                     extent[1].max((b - y[0]).abs()),
                 ];
             }
-            (identified(&rec, model), extent)
+            identified(&rec, model)
         })
         .collect();
-    let extent = runs
-        .iter()
-        .fold([0.0f64; 2], |m, (_, e)| [m[0].max(e[0]), m[1].max(e[1])]);
-    (runs.into_iter().map(|(t, _)| t).collect(), extent)
+    (thetas, extent)
 }
 
 /// θ of `rec` by the default identification (output error) of `model`.
@@ -117,12 +110,10 @@ fn eq_2_19_spread(
     d: &wheelid::design::Design,
     noise_std: [f64; 2],
 ) -> [(usize, f64); 4] {
-    use rayon::prelude::*;
     use wheelid::robots::effects::MeasurementNoise;
     use wheelid::robots::{SimSettings, simulate_recording};
     let robot = p.model_profile();
     let thetas: Vec<Vec<f64>> = (first_seed()..first_seed() + seeds())
-        .into_par_iter()
         .map(|seed| {
             let mut sim = SimSettings {
                 duration_s: d.duration_s,
