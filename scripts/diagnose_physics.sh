@@ -95,10 +95,8 @@
 # window_end) once at 0abfd4c; 1077-1080 (single, clean; pairs window_end) once at 9632cd6
 # (0abfd4c's method, the load transfer's reference corrected; the ten effects of then), a
 # report of the magnitudes; the sensor delay and the dead band joined the harness after it
-# (3bb3fbb, 960e494); 1081-1082 (pairs window_end only) once at 5b53455 (05ea0ea's method,
-# twelve effects) and clean 5271-5370 partly (Khepera-like runs first) at 5b53455: the next
-# report takes 1083.. and 5371.. (1081-1082's singles and 5271-5370's unrun remainder are
-# still unseen and may be run at 5b53455's method).
+# (3bb3fbb, 960e494); 1081-1082 (single, clean; pairs window_end) and clean 5271-5370 once
+# at 5b53455 (05ea0ea's method, twelve effects): the next report takes 1083.. and 5371.. .
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
