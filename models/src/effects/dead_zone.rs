@@ -110,23 +110,13 @@ mod tests {
         let v_ref: Vec<f64> = t.iter().map(|x| 0.5 * (0.3 * x).sin()).collect();
         let rec = Recording::new("r.csv", t, v_ref, vec![0.0; n], vec![0.0; n], vec![0.0; n])
             .expect("valid");
-        let recordings = [rec];
-        let theta = [0.0; 7];
-        let covariance = nalgebra::DMatrix::zeros(7, 7);
-        let fit = FitData {
-            recordings: &recordings,
-            theta: &theta,
-            covariance: &covariance,
-            base: 6,
-            track: Some(0.3),
-        };
-        let top = fit.command_max(0);
-        assert!((top - 0.5).abs() < 1e-3, "{top}");
-        let small = DeadZone
-            .plausible(0, 0.0005, 1e-5, &fit)
-            .expect_err("0.1 %");
-        assert!(small.contains("under 0.2 %"), "{small}");
-        assert!(DeadZone.plausible(0, 0.003, 1e-5, &fit).is_ok());
-        assert!(DeadZone.plausible(0, 0.3, 1e-5, &fit).is_err());
+        super::super::with_fit_data(rec, Some(0.3), |fit| {
+            let top = fit.command_max(0);
+            assert!((top - 0.5).abs() < 1e-3, "{top}");
+            let small = DeadZone.plausible(0, 0.0005, 1e-5, fit).expect_err("0.1 %");
+            assert!(small.contains("under 0.2 %"), "{small}");
+            assert!(DeadZone.plausible(0, 0.003, 1e-5, fit).is_ok());
+            assert!(DeadZone.plausible(0, 0.3, 1e-5, fit).is_err());
+        });
     }
 }

@@ -110,27 +110,19 @@ mod tests {
             vec![0.0; n],
         )
         .expect("valid");
-        let recordings = [rec];
-        let theta = [0.0; 7];
-        let covariance = nalgebra::DMatrix::zeros(7, 7);
-        let fit = FitData {
-            recordings: &recordings,
-            theta: &theta,
-            covariance: &covariance,
-            base: 6,
-            track: None,
-        };
-        approx::assert_relative_eq!(fit.period_s(), 0.02, max_relative = 1e-12);
-        let plausible = |x: f64| InputDelay.plausible(0, x, 1e-5, &fit);
-        let short = plausible(0.002).expect_err("a tenth of a period");
-        assert!(
-            short.contains("under 0.25 of the 0.0200 s sample period"),
-            "{short}"
-        );
-        assert!(plausible(0.0049).is_err());
-        assert!(plausible(0.010).is_ok());
-        assert!(plausible(1.6).is_err());
-        // Not significant: refused before its size is looked at.
-        assert!(InputDelay.plausible(0, 0.1, 0.05, &fit).is_err());
+        super::super::with_fit_data(rec, None, |fit| {
+            approx::assert_relative_eq!(fit.period_s(), 0.02, max_relative = 1e-12);
+            let plausible = |x: f64| InputDelay.plausible(0, x, 1e-5, fit);
+            let short = plausible(0.002).expect_err("a tenth of a period");
+            assert!(
+                short.contains("under 0.25 of the 0.0200 s sample period"),
+                "{short}"
+            );
+            assert!(plausible(0.0049).is_err());
+            assert!(plausible(0.010).is_ok());
+            assert!(plausible(1.6).is_err());
+            // Not significant: refused before its size is looked at.
+            assert!(InputDelay.plausible(0, 0.1, 0.05, fit).is_err());
+        });
     }
 }

@@ -256,3 +256,23 @@ impl<'de> Deserialize<'de> for Candidate {
         })
     }
 }
+
+/// A one-effect [`wheelid_core::effect::FitData`] over `rec` for the plausibility tests: θ1…θ6 and the
+/// effect's parameter at 0, zero covariance, the parameter at index 6; `f` gets it.
+#[cfg(test)]
+fn with_fit_data<R>(
+    rec: wheelid_core::Recording,
+    track: Option<f64>,
+    f: impl FnOnce(&wheelid_core::effect::FitData<'_>) -> R,
+) -> R {
+    let recordings = [rec];
+    let theta = [0.0; 7];
+    let covariance = nalgebra::DMatrix::zeros(7, 7);
+    f(&wheelid_core::effect::FitData {
+        recordings: &recordings,
+        theta: &theta,
+        covariance: &covariance,
+        base: 6,
+        track,
+    })
+}
