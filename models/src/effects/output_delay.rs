@@ -247,23 +247,23 @@ fn trim(windows: &mut [Windows], lag: f64, skip: (f64, f64)) -> Option<()> {
     let resid = |w: &Windows, k: usize| {
         moved_turn(w, k, lag).map(|y| y - a * w.cols[k][0] - b * w.cols[k][1])
     };
-    let mut abs: Vec<f64> = windows
+    // Each used window's residual, once: for the median, then against the limit.
+    let resids: Vec<Vec<(usize, Option<f64>)>> = windows
         .iter()
-        .flat_map(|w| {
-            used(w, skip)
-                .filter_map(|k| resid(w, k))
-                .collect::<Vec<_>>()
-        })
-        .map(f64::abs)
+        .map(|w| used(w, skip).map(|k| (k, resid(w, k))).collect())
+        .collect();
+    let mut abs: Vec<f64> = resids
+        .iter()
+        .flatten()
+        .filter_map(|&(_, r)| r.map(f64::abs))
         .collect();
     abs.sort_by(f64::total_cmp);
     let limit = TRIM_Z * 1.4826 * *abs.get(abs.len() / 2)?;
-    for w in windows.iter_mut() {
-        let out: Vec<usize> = used(w, skip)
-            .filter(|&k| resid(w, k).is_none_or(|r| r.abs() > limit))
-            .collect();
-        for k in out {
-            w.keep[k] = false;
+    for (w, rs) in windows.iter_mut().zip(&resids) {
+        for &(k, r) in rs {
+            if r.is_none_or(|r| r.abs() > limit) {
+                w.keep[k] = false;
+            }
         }
     }
     Some(())
