@@ -299,6 +299,17 @@ fn amplitudes(
 /// channel.
 type Response = (Recording, Vec<Vec<f64>>, Vec<DMatrix<f64>>);
 
+/// The recording of `exc`'s commands (held) over `duration_s` at the design's sample period,
+/// its outputs zero.
+fn commands(s: &DesignSettings, exc: &Excitation, duration_s: f64) -> Result<Recording> {
+    let n = (duration_s / s.dt_s).round() as usize + 1;
+    let t: Vec<f64> = (0..n).map(|k| k as f64 * s.dt_s).collect();
+    let (v_ref, w_ref): (Vec<f64>, Vec<f64>) = t.iter().map(|&x| exc.at(x)).unzip();
+    let mut rec = Recording::new("design", t, v_ref, w_ref, vec![0.0; n], vec![0.0; n])?;
+    rec.set_meta("command_hold", "zoh");
+    Ok(rec)
+}
+
 /// The model's response to `exc` from rest over `duration_s`, with its sensitivities.
 fn respond(
     model: &dyn DynamicModel,
@@ -306,11 +317,7 @@ fn respond(
     exc: &Excitation,
     duration_s: f64,
 ) -> Result<Response> {
-    let n = (duration_s / s.dt_s).round() as usize + 1;
-    let t: Vec<f64> = (0..n).map(|k| k as f64 * s.dt_s).collect();
-    let (v_ref, w_ref): (Vec<f64>, Vec<f64>) = t.iter().map(|&x| exc.at(x)).unzip();
-    let mut rec = Recording::new("design", t, v_ref, w_ref, vec![0.0; n], vec![0.0; n])?;
-    rec.set_meta("command_hold", "zoh");
+    let rec = commands(s, exc, duration_s)?;
     let (sim, sens) = model
         .simulate_with_sensitivities(&s.theta, &rec, &s.start_velocity)?
         .ok_or_else(|| Error::InvalidSetting("the model gives no sensitivities".into()))?;
@@ -432,7 +439,9 @@ fn candidate(
         let Some((needed, duration_s, se)) = duration(s, &m) else {
             return Ok(None);
         };
-        let (rec, sim, _) = respond(model, s, &exc, duration_s)?;
+        // The pose needs the outputs alone (no sensitivities: 18 states a step fewer).
+        let rec = commands(s, &exc, duration_s)?;
+        let sim = model.simulate(&s.theta, &rec, &s.start_velocity)?;
         Ok(Some(Candidate {
             path: path(&rec, &sim),
             exc,
