@@ -512,6 +512,13 @@ pub(super) fn remove_candidate(
     cur: &Current,
     k: usize,
 ) -> std::result::Result<Current, String> {
+    let (cands, theta, pinned) = without_candidate(cur, k);
+    refit(data, cands, &theta, pinned)
+}
+
+/// The candidates, θ and held parameters of `cur` less its `k`-th candidate, not refitted:
+/// the other parameters as they were fitted beside it.
+pub(super) fn without_candidate(cur: &Current, k: usize) -> (Vec<Candidate>, Vec<f64>, Vec<usize>) {
     let offset = 6 + cur.candidates[..k]
         .iter()
         .map(|c| c.params().len())
@@ -527,7 +534,7 @@ pub(super) fn remove_candidate(
         .filter(|&&i| i < offset || i >= offset + len)
         .map(|&i| if i >= offset { i - len } else { i })
         .collect();
-    refit(data, cands, &theta, pinned)
+    (cands, theta, pinned)
 }
 
 /// The model with `candidates` fitted on the training blocks from `theta`, the `pinned`
