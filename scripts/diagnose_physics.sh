@@ -96,7 +96,11 @@
 # (0abfd4c's method, the load transfer's reference corrected; the ten effects of then), a
 # report of the magnitudes; the sensor delay and the dead band joined the harness after it
 # (3bb3fbb, 960e494); 1081-1082 (single, clean; pairs window_end) and clean 5271-5370 once
-# at 5b53455 (05ea0ea's method, twelve effects): the next report takes 1083.. and 5371.. .
+# at 5b53455 (05ea0ea's method, twelve effects), then their misses were looked at (their
+# cached recordings tuned on, with tuning seeds 4-13's floor + sensor delay pairs: the heading's
+# lag trimmed to a fixed point, 3b39780; a measured delay fitted from the model beside its
+# stand-in, ab20401); the next report, declared before it runs, is 1083-1084 (single, clean;
+# pairs window_end) and clean 5371-5470 at ab20401's method.
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
