@@ -225,11 +225,11 @@ pub(super) fn beside_measured(data: &Data, cur: &Current, c: Candidate) -> bool 
 
 /// `cur` with measured candidate `c` (its measurement `m`) added and refitted on the training
 /// blocks from the measured values, held within the measurement's bounds; its finding. The fit
-/// starts from `cur`'s θ and from `carried` (the same parameters as they were fitted beside the
-/// candidates `c` replaces), and keeps the smaller residual spread (Σ ln σ̂ over channels): refitted without a dead time of
-/// the commands, a traction limit beside a sensor delay absorbs the delay, and from there the
-/// delay's refit ran to the limit's bounds (tuning seeds 5, 6, 10: validation fit ω 78–87 %
-/// instead of 97 %).
+/// starts from `cur`'s θ and from `carried` (the same parameters as they were fitted beside
+/// the candidates `c` replaces), and keeps the smaller residual spread (Σ ln σ̂ over the
+/// channels): refitted without a dead time of the commands, a traction limit beside a sensor
+/// delay absorbs the delay, and from there the delay's refit ran to the limit's bounds (tuning
+/// seeds 5, 6, 10: validation fit ω 78–87 % instead of 97 %).
 fn fit_measured(
     data: &Data,
     cur: &Current,
