@@ -282,8 +282,8 @@ fn trim(windows: &mut [Windows], lag: f64, skip: (f64, f64)) -> Option<usize> {
 /// ([`Recording::independent_heading`]). Over every sample window the heading's turn moved
 /// back by τ is regressed on what the encoders report for the window; τ̂ minimises the sum of
 /// squares on a grid of a tenth of a sample period over [−1 period, [`MAX_LAG_S`]], refined by
-/// a parabola, then again without the windows whose residual is an outlier (slipping wheels;
-/// [`trim`]) until none is, and its standard error is the Gauss–Newton one, σ̂ / ‖∂r/∂τ‖. `None` without such a heading or where the turns do not
+/// a parabola, then again without the windows whose residual is an outlier (slipping wheels)
+/// until none is, and its standard error is the Gauss–Newton one, σ̂ / ‖∂r/∂τ‖. `None` without such a heading or where the turns do not
 /// determine the regression (no turning).
 pub fn heading_lag(recordings: &[Recording]) -> Option<(f64, f64)> {
     let mut windows: Vec<Windows> = recordings.iter().filter_map(Windows::of).collect();
