@@ -100,7 +100,9 @@
 # cached recordings tuned on, with tuning seeds 4-13's floor + sensor delay pairs: the heading's
 # lag trimmed to a fixed point, 3b39780; a measured delay fitted from the model beside its
 # stand-in, ab20401); the next report, declared before it runs, is 1083-1084 (single, clean;
-# pairs window_end) and clean 5371-5470 at ab20401's method.
+# pairs window_end) and clean 5371-5470 at ab20401's method; 1083-1084 (pairs window_end;
+# single, clean) run at 51c4c9e (= ab20401's method), clean 5371-5470 not yet: the next run
+# takes them, then 1085.. and 5471.. .
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
