@@ -439,7 +439,7 @@ fn candidate(
         let Some((needed, duration_s, se)) = duration(s, &m) else {
             return Ok(None);
         };
-        // The pose needs the outputs alone (no sensitivities: 18 states a step fewer).
+        // The pose needs the outputs alone: 2 states a step instead of the sensitivity pass's 18.
         let rec = commands(s, &exc, duration_s)?;
         let sim = model.simulate(&s.theta, &rec, &s.start_velocity)?;
         Ok(Some(Candidate {

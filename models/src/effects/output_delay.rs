@@ -43,9 +43,8 @@ pub const LAG_Z: f64 = 4.0;
 /// Robust standard deviations beyond which a window's residual is dropped ([`trim`]).
 const TRIM_Z: f64 = 2.5;
 
-/// Most passes of [`trim`]: it repeats until a pass drops no window (on the tuning seeds' slip
-/// cases 5–12 passes; three, before 2026-11-29, left a Khepera-like robot's lag 30–47 % short
-/// where the wheels slip on half the samples).
+/// Most passes of [`trim`]: it repeats until a pass drops no window (three, before 2026-11-29,
+/// left a Khepera-like robot's lag 30–47 % short where the wheels slip on half the samples).
 const MAX_TRIMS: usize = 20;
 
 /// Periods either side of the lag that a pass of [`trim`] searches again ([`heading_lag`]).
@@ -283,8 +282,8 @@ fn trim(windows: &mut [Windows], lag: f64, skip: (f64, f64)) -> Option<usize> {
 /// back by τ is regressed on what the encoders report for the window; τ̂ minimises the sum of
 /// squares on a grid of a tenth of a sample period over [−1 period, [`MAX_LAG_S`]], refined by
 /// a parabola, then again without the windows whose residual is an outlier (slipping wheels)
-/// until none is, and its standard error is the Gauss–Newton one, σ̂ / ‖∂r/∂τ‖. `None` without such a heading or where the turns do not
-/// determine the regression (no turning).
+/// until none is, and its standard error is the Gauss–Newton one, σ̂ / ‖∂r/∂τ‖. `None`
+/// without such a heading or where the turns do not determine the regression (no turning).
 pub fn heading_lag(recordings: &[Recording]) -> Option<(f64, f64)> {
     let mut windows: Vec<Windows> = recordings.iter().filter_map(Windows::of).collect();
     let first = windows.first()?;
