@@ -101,8 +101,10 @@
 # lag trimmed to a fixed point, 3b39780; a measured delay fitted from the model beside its
 # stand-in, ab20401); the next report, declared before it runs, is 1083-1084 (single, clean;
 # pairs window_end) and clean 5371-5470 at ab20401's method; 1083-1084 (pairs window_end;
-# single, clean) run at 51c4c9e (= ab20401's method), clean 5371-5470 not yet: the next run
-# takes them, then 1085.. and 5471.. .
+# single, clean) and clean 5371-5470 once at 51c4c9e (= ab20401's method), then their misses
+# were looked at (a measured delay's significance on its measurement's standard error, the
+# rank a refit beside it loses held, 2026-11-29); the next report, declared before it runs, is
+# 1085-1086 (pairs window_end; single, clean) and clean 5471-5570 at that method.
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
