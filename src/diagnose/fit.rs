@@ -599,13 +599,7 @@ pub(super) fn refit_holding(
     theta: &[f64],
     pinned: Vec<usize>,
 ) -> std::result::Result<Current, String> {
-    let (t_lo, t_hi) = data.span();
-    let margin = 0.05 * (t_hi - t_lo);
-    let bounds = model_bounds(&candidates, (t_lo + margin, t_hi - margin));
-    let model = data.model(&candidates);
-    let ((fit, full, free), _) =
-        fit_holding(data, &model, theta, &pinned, &bounds, 6..theta.len())?;
-    current_of(&model, candidates, pinned, &fit, full, &free, data)
+    refit_within(data, candidates, theta, pinned, 6..theta.len())
 }
 
 /// The model with `candidates` fitted on the training blocks from `theta`, the `pinned`
@@ -616,11 +610,23 @@ pub(super) fn refit(
     theta: &[f64],
     pinned: Vec<usize>,
 ) -> std::result::Result<Current, String> {
+    refit_within(data, candidates, theta, pinned, 0..0)
+}
+
+/// [`refit`], holding those of the parameters at `holdable` that the data cannot separate
+/// ([`fit_holding`]; none for an empty range).
+fn refit_within(
+    data: &Data,
+    candidates: Vec<Candidate>,
+    theta: &[f64],
+    pinned: Vec<usize>,
+    holdable: std::ops::Range<usize>,
+) -> std::result::Result<Current, String> {
     let (t_lo, t_hi) = data.span();
     let margin = 0.05 * (t_hi - t_lo);
     let bounds = model_bounds(&candidates, (t_lo + margin, t_hi - margin));
     let model = data.model(&candidates);
-    let (fit, full, free) = fit_pinned(data, &model, theta, &pinned, &bounds)?;
+    let ((fit, full, free), _) = fit_holding(data, &model, theta, &pinned, &bounds, holdable)?;
     current_of(&model, candidates, pinned, &fit, full, &free, data)
 }
 
