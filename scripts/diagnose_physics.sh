@@ -104,7 +104,9 @@
 # single, clean) and clean 5371-5470 once at 51c4c9e (= ab20401's method), then their misses
 # were looked at (a measured delay's significance on its measurement's standard error, the
 # rank a refit beside it loses held, 2026-11-29); the next report, declared before it runs, is
-# 1085-1086 (pairs window_end; single, clean) and clean 5471-5570 at that method.
+# 1085-1086 (pairs window_end; single, clean) and clean 5471-5570 at that method; run once at
+# 28ae373 (binary of its tree; bf3296c only merges two refits, same behaviour). The next
+# report takes 1087.. and 5571.. .
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
