@@ -362,10 +362,6 @@ mod tests {
         }
     }
 
-    /// Held at the heading only where the fit sits at an end of the bounds and the heading is
-    /// sure it is not there: 1049's tyre beside a weak amplifier (ρ̂ = 1.0489 ± 0.00001, the
-    /// fit at the far end 1.0587) is; 1050's on a slippery floor (1.0640 ± 0.0149, the fit at
-    /// the near end 1.0427, 1.4 standard errors off) is not; nor is a fit inside the bounds.
     /// Two independent standard errors combine as 1/√(1/a² + 1/b²): 3 and 4 give 2.4 (the
     /// 3-4-5 triangle's height); the measurement's alone where the dynamics give none.
     #[test]
@@ -376,6 +372,10 @@ mod tests {
         assert_eq!(combined_std_err(f64::NAN, 0.5), 0.5);
     }
 
+    /// Held at the heading only where the fit sits at an end of the bounds and the heading is
+    /// sure it is not there: 1049's tyre beside a weak amplifier (ρ̂ = 1.0489 ± 0.00001, the
+    /// fit at the far end 1.0587) is; 1050's on a slippery floor (1.0640 ± 0.0149, the fit at
+    /// the near end 1.0427, 1.4 standard errors off) is not; nor is a fit inside the bounds.
     #[test]
     fn a_fit_at_its_bound_is_held_where_the_measurement_contradicts_it() {
         let sure = heading(1.0489, 0.00001);
