@@ -256,9 +256,11 @@ fn fit_measured(
         theta
     };
     let model = data.model(&cands);
-    let held = cur.theta.len();
+    // Where `c`'s parameters start in θ; the other effects' before it, 6..at, are held where
+    // the data cannot separate them beside `c`.
+    let at = cur.theta.len();
     let fit_from =
-        |base: &[f64]| fit_holding(data, &model, &start(base), &cur.pinned, &bounds, 6..held);
+        |base: &[f64]| fit_holding(data, &model, &start(base), &cur.pinned, &bounds, 6..at);
     let (refitted, beside) = if carried == cur.theta.as_slice() {
         (fit_from(&cur.theta), None)
     } else {
@@ -274,8 +276,7 @@ fn fit_measured(
         (a, _) => a?,
     };
     let mut new = current_of(&model, cands, pinned, &fit, full, &free, data)?;
-    let base = cur.theta.len();
-    take_measured_std_err(&mut new, base, m);
+    take_measured_std_err(&mut new, at, m);
     check_candidate(data, &new, c)?;
     let judged = data.judged(&[cur, &new]);
     let (_, before) = data.validate_on(&cur.sim, &judged);
@@ -286,10 +287,10 @@ fn fit_measured(
         effect: c.name().into(),
         channels: channels_of(c, |_| true),
         parameters: (0..c.params().len())
-            .map(|j| (named(j), new.theta[base + j]))
+            .map(|j| (named(j), new.theta[at + j]))
             .collect(),
         std_err: (0..c.params().len())
-            .map(|j| (named(j), new.std_err[base + j]))
+            .map(|j| (named(j), new.std_err[at + j]))
             .collect(),
         evidence: format!(
             "measured: {} (the dynamics fitted within {}); validation cost {:+.1} %",
