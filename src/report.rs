@@ -607,7 +607,7 @@ fn diagnosis_model_and_show(s: &mut String, d: &Diagnosis) {
             .iter()
             .map(|(k, v)| {
                 let e = f.std_err.get(k).copied().unwrap_or(0.0);
-                format!("{k} = {}", estimate(*v, e, " ± "))
+                format!("{k} = {}", held_or_estimate(*v, e, " ± "))
             })
             .collect();
         let _ = writeln!(
@@ -648,7 +648,7 @@ fn diagnosis_model_and_show(s: &mut String, d: &Diagnosis) {
             .names
             .iter()
             .zip(f.theta.iter().zip(&f.std_err))
-            .map(|(n, (x, e))| format!("{n} {}", estimate(*x, *e, "±")))
+            .map(|(n, (x, e))| format!("{n} {}", held_or_estimate(*x, *e, "±")))
             .collect();
         let _ = writeln!(s, "   refitted: {}", params.join(", "));
     }
@@ -682,9 +682,26 @@ fn estimate(x: f64, e: f64, sep: &str) -> String {
     format!("{x:.decimals$}{sep}{e:.decimals$}")
 }
 
+/// A diagnosis's parameter: `x (held)` where its standard error is exactly 0 — a parameter the
+/// fit held at its value (one quantity two effects carry, [`wheelid_core::Effect::held_beside`],
+/// or one the data could not separate) — else [`estimate`].
+fn held_or_estimate(x: f64, e: f64, sep: &str) -> String {
+    if e == 0.0 {
+        format!("{x:.4} (held)")
+    } else {
+        estimate(x, e, sep)
+    }
+}
+
 #[cfg(test)]
 mod tests {
-    use super::estimate;
+    use super::{estimate, held_or_estimate};
+
+    #[test]
+    fn a_held_parameter_says_so_instead_of_a_zero_error() {
+        assert_eq!(held_or_estimate(0.811_23, 0.0, " ± "), "0.8112 (held)");
+        assert_eq!(held_or_estimate(1.0668, 0.0015, " ± "), "1.0668 ± 0.0015");
+    }
 
     #[test]
     fn estimates_keep_two_digits_of_a_tiny_standard_error() {

@@ -140,7 +140,8 @@ pub struct WheelTerms {
     /// nothing, one beyond it drives e ∓ this (a motor driver's dead band; applied before the
     /// clamp; 0: none).
     pub effort_dead: f64,
-    /// κ relative to the wheel-PD loop's d/2 [-].
+    /// κ relative to the wheel-PD loop's d/2 [-]. Each effect that carries a mix
+    /// (`effort_clamp`, `dead_zone`) multiplies it, so one at its null 1 leaves it as it is.
     pub mix: f64,
     /// Right wheel's clamped effort's share on the chassis [-]: a larger tyre's 1/ρ, which
     /// acts after the amplifier's supply clamps its voltage (the clamped wheel pushes the
@@ -458,6 +459,12 @@ pub trait Effect: Send + Sync + std::fmt::Debug {
     /// held at their null first, then frees them from that fit — from the null and from the
     /// start — and keeps the cheaper refit where it costs less. Default: none.
     fn secondary(&self, _theta: &[f64]) -> Vec<(usize, f64)> {
+        Vec::new()
+    }
+    /// Its parameters held (at their values in hand) while the effects named `others` are in
+    /// the model beside it: one physical quantity two effects both carry, which the data
+    /// cannot give to both (the wheels' mix κ of a dead band beside a clamp's). Default: none.
+    fn held_beside(&self, _others: &[&str]) -> Vec<usize> {
         Vec::new()
     }
     /// What a sensor other than the encoders measures of it on `recordings` (wheel track

@@ -468,7 +468,9 @@ pub(super) fn fit_pinned_or(
     pinned: &[usize],
     bounds: &[(f64, f64)],
 ) -> std::result::Result<PinnedFit, wheelid_core::SolveError> {
-    let restricted = Pinned::new(model, theta.to_vec(), pinned);
+    let mut pinned = pinned.to_vec();
+    pinned.extend(held_beside(model.candidates()));
+    let restricted = Pinned::new(model, theta.to_vec(), &pinned);
     let differenced = model.candidates().iter().any(|c| c.effect().differenced());
     let oe = OutputError {
         bounds: Some(restricted.free.iter().map(|&i| bounds[i]).collect()),
@@ -485,6 +487,19 @@ pub(super) fn fit_pinned_or(
     let fit = oe.fit(&restricted, &data.recs, &restricted.free_values())?;
     let full = restricted.expand(&fit.theta);
     Ok((fit, full, restricted.free))
+}
+
+/// The θ indices of the candidates' parameters held beside the others in the model
+/// ([`wheelid_core::Effect::held_beside`]).
+fn held_beside(candidates: &[Candidate]) -> Vec<usize> {
+    let names: Vec<&str> = candidates.iter().map(|c| c.name()).collect();
+    let mut at = 6;
+    let mut held = Vec::new();
+    for c in candidates {
+        held.extend(c.effect().held_beside(&names).into_iter().map(|j| at + j));
+        at += c.params().len();
+    }
+    held
 }
 
 /// The search state after a fit: standard errors and covariance spread back onto the full θ

@@ -16,15 +16,32 @@
 //! efforts, where a wheel within its band gets nothing at all. Source: the dead-zone
 //! nonlinearity of actuators, G. Tao & P. V. Kokotović, *Adaptive control of systems with
 //! actuator and sensor nonlinearities* (Wiley, 1996), ch. 2.
+//!
+//! Which efforts the band acts on depends on how the turn loop's effort splits between the
+//! wheels: e_R,L = E_v ± κ E_ω, κ = `mix` · d/2 ([`wheelid_core::WheelTerms`]). A loop per
+//! wheel (§2.2) has κ = d/2, `mix` 1; a v/ω loop (Appendix A.3) has its own split (the
+//! Pioneer-like physics profile's is 0.866), and a band read with the wrong split leaves ω's
+//! fit at 99.0–99.3 % where it reaches 99.9 % (physics harness, Pioneer-like dead bands).
+//! `mix` multiplies the wheels' κ as `effort_clamp`'s does; one wheel split carries one κ, so
+//! beside a clamp the band's `mix` is held ([`Effect::held_beside`]) and the clamp's fits the
+//! product.
 
 use wheelid_core::effect::{FitData, Probe, ProbeData, Search, Terms, significant};
 use wheelid_core::{Effect, EffectChannels, ParamInfo, Result, WheelTerms};
 
-static PARAMS: [ParamInfo; 1] = [ParamInfo {
-    name: "effort_dead",
-    unit: "m/s",
-    description: "each wheel's dead band, in wheel rim speed error (effort) units",
-}];
+static PARAMS: [ParamInfo; 2] = [
+    ParamInfo {
+        name: "effort_dead",
+        unit: "m/s",
+        description: "each wheel's dead band, in wheel rim speed error (effort) units",
+    },
+    ParamInfo {
+        name: "mix",
+        unit: "1",
+        description: "the wheels' split of the turn loop's effort, κ = mix · d/2 (1 for a \
+                      loop per wheel); held beside effort_clamp, whose mix multiplies it",
+    },
+];
 
 /// Smallest dead band named, as a share of the largest forward command. On tuning seed 3 a
 /// band of 0.1 % of it (0.5 mm/s on the Pioneer-like robot) was named beside a rate limit and
@@ -49,10 +66,17 @@ impl Effect for DeadZone {
         EffectChannels::Both
     }
     fn null(&self, _theta: &[f64], _t_mid: f64) -> Vec<f64> {
-        vec![0.0]
+        vec![0.0, 1.0]
     }
     fn bounds(&self, _t_range: (f64, f64)) -> Vec<(f64, f64)> {
-        vec![(0.0, f64::INFINITY)]
+        vec![(0.0, f64::INFINITY), (0.05, 20.0)]
+    }
+    fn held_beside(&self, others: &[&str]) -> Vec<usize> {
+        if others.contains(&"effort_clamp") {
+            vec![1]
+        } else {
+            Vec::new()
+        }
     }
     fn search(&self) -> Search {
         Search::Smooth
@@ -70,6 +94,13 @@ impl Effect for DeadZone {
         se: f64,
         fit: &FitData<'_>,
     ) -> std::result::Result<(), String> {
+        if j == 1 {
+            return if (0.1..=10.0).contains(&x) {
+                Ok(())
+            } else {
+                Err(format!("mix = {x:.3} is no drive's (0.1…10)"))
+            };
+        }
         significant(&PARAMS[j], x, se, 0.0)?;
         let top = fit.command_max(0).max(1e-9);
         if x > 0.5 * top {
@@ -87,10 +118,9 @@ impl Effect for DeadZone {
         Ok(())
     }
     fn apply(&self, p: &[f64], terms: &mut Terms) -> Result<()> {
-        terms
-            .wheels
-            .get_or_insert_with(WheelTerms::default)
-            .effort_dead = p[0].max(0.0);
+        let w = terms.wheels.get_or_insert_with(WheelTerms::default);
+        w.effort_dead = p[0].max(0.0);
+        w.mix *= p[1];
         Ok(())
     }
 }

@@ -45,7 +45,8 @@ static PARAMS: [ParamInfo; 3] = [
     ParamInfo {
         name: "mix",
         unit: "-",
-        description: "ω effort's share in each wheel, relative to the wheel-PD loop's d/2",
+        description: "ω effort's share in each wheel, relative to the wheel-PD loop's d/2 \
+                      (multiplies a dead_zone's mix, held beside it)",
     },
     ParamInfo {
         name: "derivative_s",
@@ -181,7 +182,7 @@ impl Effect for EffortClamp {
     fn apply(&self, p: &[f64], terms: &mut Terms) -> Result<()> {
         let w = terms.wheels.get_or_insert_with(WheelTerms::default);
         w.effort_max = p[0].abs();
-        w.mix = p[1];
+        w.mix *= p[1];
         w.derivative = p[2];
         Ok(())
     }

@@ -124,8 +124,9 @@ fn effort_clamp_matches_its_closed_form() {
 
 /// A dead band β on a straight command u from rest (both wheels' efforts u − v − δ v̇ beyond
 /// it): θ1 v̇ = u − β − θ4 v, v = (u − β)/θ4 (1 − e^(−θ4 t/θ1)), whether or not the loop has
-/// a derivative term δ (a wheel beyond its band keeps it); a command within the band does not
-/// move the robot.
+/// a derivative term δ (a wheel beyond its band keeps it) and whatever the wheels' split (a
+/// straight run has no turn effort to split); a command within the band does not move the
+/// robot.
 #[test]
 fn a_dead_band_matches_its_closed_form() {
     let (u, beta, track) = (0.4, 0.07, 0.3);
@@ -133,11 +134,11 @@ fn a_dead_band_matches_its_closed_form() {
     // inside it, past 1.4 s).
     let rec = recording(false, 13, |_| (u, 0.0));
     let cases: [(&[Candidate], Vec<f64>); 2] = [
-        (&[Candidate::DEAD_ZONE], vec![beta]),
+        (&[Candidate::DEAD_ZONE], vec![beta, 0.7]),
         // A clamp no effort reaches, with its derivative term.
         (
             &[Candidate::EFFORT_CLAMP, Candidate::DEAD_ZONE],
-            vec![100.0, 1.0, 0.05, beta],
+            vec![100.0, 1.0, 0.05, beta, 1.0],
         ),
     ];
     for (cands, extra) in cases {
@@ -246,10 +247,10 @@ fn analytic_sensitivities_match_central_differences_with_every_candidate() {
         ),
         (vec![Candidate::GAIN_DRIFT], vec![0.01]),
         (vec![Candidate::OUTPUT_DELAY], vec![0.23]),
-        (vec![Candidate::DEAD_ZONE], vec![0.05]),
+        (vec![Candidate::DEAD_ZONE], vec![0.05, 0.8]),
         (
             vec![Candidate::EFFORT_CLAMP, Candidate::DEAD_ZONE],
-            vec![0.12, 1.3, 0.03, 0.02],
+            vec![0.12, 1.3, 0.03, 0.02, 0.9],
         ),
         (
             vec![Candidate::OUTPUT_DELAY, Candidate::PAYLOAD_CHANGE],
