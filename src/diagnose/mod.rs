@@ -510,6 +510,8 @@ pub fn diagnose_observed(
         &nominal_fit.initial,
     )
     .ok_or_else(|| DiagnoseError::Setting("the nominal model does not simulate".into()))?;
+    // The report compares the final model with this simulation (simulated once).
+    let nominal_sim = sim.clone();
     let cur = Current {
         candidates: Vec::new(),
         pinned: Vec::new(),
@@ -526,13 +528,6 @@ pub fn diagnose_observed(
     let location = locate::locate(&data.recs, &cur.sim, &data.valid, data.dt, max_lag);
     let search = excerpt::search_on(&data, cur, settings, &location, &progress)?;
     progress.step("done", 1);
-    let nominal_sim = simulate_all(
-        &nominal_model,
-        &nominal_fit.theta,
-        &data.recs,
-        &nominal_fit.initial,
-    )
-    .unwrap_or_else(|| search.cur.sim.clone());
     Ok(assemble::assemble(
         &data,
         settings,
