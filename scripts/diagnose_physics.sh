@@ -110,7 +110,9 @@
 # mix, held beside a clamp's, 2026-11-29; tuned on 1083 and 1085's cached pairs, 1085-1086's
 # singles and clean seeds 5471-5500); the next report, declared before it runs, is 1087-1088
 # (pairs window_end; single, clean) and clean 5571-5670 at that method; run once at 3d1fc45
-# (binary of its tree).
+# (binary of its tree), then 1087's dead band beside a rate limit was looked at (the band's
+# split fitted once the band is, `secondary`); the next report, declared before it runs, is
+# 1089-1090 (pairs window_end; single, clean) and clean 5671-5770.
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
