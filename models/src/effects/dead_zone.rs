@@ -20,7 +20,8 @@
 //! Which efforts the band acts on depends on how the turn loop's effort splits between the
 //! wheels: e_R,L = E_v ± κ E_ω, κ = `mix` · d/2 ([`wheelid_core::WheelTerms`]). A loop per
 //! wheel (§2.2) has κ = d/2, `mix` 1; a v/ω loop (Appendix A.3) has its own split (the
-//! Pioneer-like physics profile's is 0.866), and a band read with the wrong split leaves ω's
+//! Pioneer-like physics profile's gains give (K_PR/K_PT)/(d/2) = 0.863; its clamps were fitted
+//! at 0.866), and a band read with the wrong split leaves ω's
 //! fit at 99.0–99.3 % where it reaches 99.9 % (physics harness, Pioneer-like dead bands).
 //! `mix` multiplies the wheels' κ as `effort_clamp`'s does; one wheel split carries one κ, so
 //! beside a clamp the band's `mix` is held ([`Effect::held_beside`]) and the clamp's fits the
