@@ -221,6 +221,15 @@ fn pioneer_recording(
     (rec, model)
 }
 
+/// The wheels' split of the turn loop's effort relative to d/2 (`dead_zone`'s and
+/// `effort_clamp`'s `mix`): 1 for a loop per wheel, (K_PR/K_PT)/(d/2) for a v/ω loop.
+fn wheel_split(p: &PhysicalProfile) -> f64 {
+    match p.controller {
+        Controller::WheelPd { .. } => 1.0,
+        Controller::VwPd { k_pt, k_pr, .. } => k_pr / k_pt / (p.d / 2.0),
+    }
+}
+
 /// Parameter `name` of finding `effect` in `d`.
 ///
 /// # Panics
@@ -610,14 +619,14 @@ fn a_dead_band_beside_a_rate_limit_is_named_with_the_loops_split() {
     let d = diagnose(&[rec], model.as_ref(), &DiagnoseSettings::default()).expect("diagnoses");
     assert_named_sorted(&d, &["acceleration_limit", "dead_zone"]);
     let p = PhysicalProfile::pioneer3dx();
-    let Controller::VwPd { k_pt, k_pr, .. } = p.controller else {
+    let Controller::VwPd { k_pt, .. } = p.controller else {
         panic!("a v/ω-PD profile");
     };
     let (beta, kappa) = (
         finding_param(&d, "dead_zone", "effort_dead"),
         finding_param(&d, "dead_zone", "mix"),
     );
-    let (band, split) = (volts / k_pt, k_pr / k_pt / (p.d / 2.0));
+    let (band, split) = (volts / k_pt, wheel_split(&p));
     println!("effort_dead {beta:.5} vs {band:.5}; mix {kappa:.4} vs {split:.4}");
     assert!((beta / band - 1.0).abs() < 0.1, "effort_dead {beta}");
     assert!((kappa / split - 1.0).abs() < 0.05, "mix {kappa}");
@@ -961,10 +970,11 @@ fn an_amplifier_dead_band_is_named_dead_zone() {
         (PhysicalProfile::khepera3(), 0.004, 96.0),
         (PhysicalProfile::pioneer3dx(), 0.008, 99.8),
     ] {
-        let (volts, mix) = match p.controller {
-            Controller::WheelPd { k_p, .. } => (effort * k_p / p.r, 1.0),
-            Controller::VwPd { k_pt, k_pr, .. } => (effort * k_pt, k_pr / k_pt / (p.d / 2.0)),
+        let volts = match p.controller {
+            Controller::WheelPd { k_p, .. } => effort * k_p / p.r,
+            Controller::VwPd { k_pt, .. } => effort * k_pt,
         };
+        let mix = wheel_split(&p);
         let d = diagnosed(&p, 1302, |s| s.effects.dead_band_v = Some(volts));
         let beta = named_param(&d, "dead_zone", "effort_dead").expect("band");
         // Held at 1 where the data do not place it 3 σ away (its `secondary` fit).
