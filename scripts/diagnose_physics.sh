@@ -112,7 +112,9 @@
 # (pairs window_end; single, clean) and clean 5571-5670 at that method; run once at 3d1fc45
 # (binary of its tree), then 1087's dead band beside a rate limit was looked at (the band's
 # split fitted once the band is, `secondary`); the next report, declared before it runs, is
-# 1089-1090 (pairs window_end; single, clean) and clean 5671-5770.
+# 1089-1090 (pairs window_end; single, clean) and clean 5671-5770; widened before any of it was
+# read (2026-11-29, the same binary, for a narrower interval on the pairs) to 1089-1092 (pairs
+# window_end; single, clean) and clean 5671-5770, at 0311cad's method.
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
