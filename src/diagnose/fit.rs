@@ -209,13 +209,15 @@ fn flat_change_times(
 /// `theta` at their null and added to `pinned`, and those of the others still held there (an
 /// earlier fit could not free them; beside the new candidate it may: a payload's new θ1
 /// separates a clamp's derivative term from its level), each (index, start) for θ1…θ6 of
-/// `nominal`.
+/// `nominal`. Those the others hold ([`held_beside`]: a dead band's split beside a clamp's)
+/// are held at their null and not returned: freeing them would refit twice with them held.
 fn hold_secondary(
     candidates: &[Candidate],
     nominal: &[f64],
     theta: &mut [f64],
     pinned: &mut Vec<usize>,
 ) -> Vec<(usize, f64)> {
+    let held = held_beside(candidates);
     let mut out = Vec::new();
     let mut offset = 6;
     for (k, c) in candidates.iter().enumerate() {
@@ -226,8 +228,10 @@ fn hold_secondary(
             if new && !pinned.contains(&i) {
                 theta[i] = null[j];
                 pinned.push(i);
-                out.push((i, start));
-            } else if !new && pinned.contains(&i) {
+                if !held.contains(&i) {
+                    out.push((i, start));
+                }
+            } else if !new && pinned.contains(&i) && !held.contains(&i) {
                 out.push((i, start));
             }
         }
@@ -659,5 +663,34 @@ mod tests {
         assert_eq!(flat_minimum(grid(), cost, 1e-9), (3.0, 5.0));
         // 1 + 0.25² = 1.0625 is within 10 %, 1 + 0.5² = 1.25 is not.
         assert_eq!(flat_minimum(grid(), cost, 0.1), (2.75, 5.25));
+    }
+
+    /// A dead band added beside a clamp whose derivative term is still held: the band's split
+    /// is held at its null (the clamp's split stands for it) and not offered for freeing; the
+    /// clamp's derivative term is (θ indices: 6 + clamp's 3, then the band's 2). Offering the
+    /// held split made the derivative term's freeing need a split the data never separate:
+    /// seed 1087's Pioneer-like clamp + dead band kept the clamp's level 9.7 % high, 0.7 % with
+    /// its derivative term freed.
+    #[test]
+    fn a_split_held_beside_a_clamp_is_not_offered_for_freeing() {
+        let theta6 = [0.3, 0.25, 0.0, 1.0, 0.0, 1.0];
+        let cands = [Candidate::EFFORT_CLAMP, Candidate::DEAD_ZONE];
+        let mut theta = vec![0.0; 11];
+        theta[..6].copy_from_slice(&theta6);
+        theta[10] = 0.4;
+        // The clamp's derivative term (index 8) held by an earlier fit.
+        let mut pinned = vec![8];
+        let out = hold_secondary(&cands, &theta6, &mut theta, &mut pinned);
+        let offered: Vec<usize> = out.iter().map(|&(i, _)| i).collect();
+        assert_eq!(offered, vec![8]);
+        // The band's split held at its null, 1.
+        assert!(pinned.contains(&10));
+        assert_eq!(theta[10], 1.0);
+        // Alone, the band's split is offered.
+        let mut theta = vec![0.0; 8];
+        theta[..6].copy_from_slice(&theta6);
+        let mut pinned = Vec::new();
+        let out = hold_secondary(&[Candidate::DEAD_ZONE], &theta6, &mut theta, &mut pinned);
+        assert_eq!(out.iter().map(|&(i, _)| i).collect::<Vec<_>>(), vec![7]);
     }
 }
