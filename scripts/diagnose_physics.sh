@@ -114,7 +114,10 @@
 # split fitted once the band is, `secondary`); the next report, declared before it runs, is
 # 1089-1090 (pairs window_end; single, clean) and clean 5671-5770; widened before any of it was
 # read (2026-11-29, the same binary, for a narrower interval on the pairs) to 1089-1092 (pairs
-# window_end; single, clean) and clean 5671-5770, at 0311cad's method.
+# window_end; single, clean) and clean 5671-5770, at 0311cad's method; run once at 0311cad's
+# method (binary of 59fce3b's tree), then their misses were looked at; the next report,
+# declared before it runs, is 1093-1096 (pairs window_end; single, clean) and clean 5771-5870
+# at the method of acc7230 (a split held beside another effect's not offered for freeing).
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
