@@ -192,12 +192,12 @@ fn flat_change_times(
     let tolerance = (CHI2_1_95 / n_eff).exp_m1();
     let placing = data.placing_frame();
     let t0 = full[base];
+    let runs = place::TimeScan::new(model, full, base, &data.recs, &fit.initial);
+    let window = ((t0 - step).max(range.0), (t0 + step).min(range.1));
     flat_minimum(
         (-16..=16).map(|i| (t0 + step * i as f64 / 16.0).clamp(range.0, range.1)),
         |t| {
-            let mut th = full.to_vec();
-            th[base] = t;
-            simulate_all(model, &th, &data.recs, &fit.initial)
+            runs.at(t, window)
                 .map_or(f64::INFINITY, |y| placing.residuals(&y).norm_squared())
         },
         tolerance,

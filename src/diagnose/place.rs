@@ -14,6 +14,7 @@
 //! that placed the time.
 
 use super::*;
+use wheelid_models::extended::Trace;
 
 /// χ²₁ at 0.95.
 const CHI2_1_95: f64 = 3.841;
@@ -38,10 +39,9 @@ pub(super) fn change_times(
         let half = reported(c).unwrap_or(cur.std_err[at]);
         let t = cur.theta[at];
         if c.effect().search() == Search::ChangeTime && half.is_finite() && half > 2.0 * data.dt {
-            let cost = |time: f64| {
-                let mut th = cur.theta.clone();
-                th[at] = time;
-                simulate_all(&model, &th, &data.recs, &cur.initial)
+            let runs = TimeScan::new(&model, &cur.theta, at, &data.recs, &cur.initial);
+            let cost = |time: f64, window: (f64, f64)| {
+                runs.at(time, window)
                     .map_or(f64::INFINITY, |y| all_samples_cost(data, &y))
             };
             let n_eff = data.effective_samples_on(&cur.sim, &all).max(1.0);
@@ -49,7 +49,7 @@ pub(super) fn change_times(
             // A coarse scan across the interval, then a fine one around its flat minimum.
             let scan = |from: f64, to: f64| {
                 let times = (0..=32).map(move |i| from + (to - from) * i as f64 / 32.0);
-                fit::flat_minimum(times, cost, tolerance)
+                fit::flat_minimum(times, |t| cost(t, (from, to)), tolerance)
             };
             let (mut from, mut to) = (t - half, t + half);
             let (mut lo, mut hi) = scan(from, to);
@@ -76,6 +76,73 @@ pub(super) fn change_times(
         at += n;
     }
     moved
+}
+
+/// Simulations of a model whose change time (θ's parameter `at`) is scanned: each recording's
+/// run at θ is traced once, and a run with the time moved is resumed from it
+/// ([`Extended::resumed`]: the whole simulation to the bit, integrated only from before the
+/// scanned window to where the two runs' states meet again after it; a 10-minute drive
+/// scanned over a validation block integrates about a tenth of it per time).
+pub(super) struct TimeScan<'a> {
+    model: &'a Extended,
+    theta: &'a [f64],
+    at: usize,
+    recs: &'a [Recording],
+    initial: &'a [Vec<f64>],
+    /// Per recording, the trace of the run at θ (`None`: simulated whole).
+    traces: Vec<Option<Trace>>,
+}
+
+impl<'a> TimeScan<'a> {
+    /// The scan of parameter `at` of `theta` (a change time \[s\]) of `model` on `recs` from
+    /// `initial` (one state per recording).
+    pub(super) fn new(
+        model: &'a Extended,
+        theta: &'a [f64],
+        at: usize,
+        recs: &'a [Recording],
+        initial: &'a [Vec<f64>],
+    ) -> Self {
+        use rayon::prelude::*;
+        let traces = recs
+            .par_iter()
+            .zip(initial)
+            .map(|(r, x0)| model.traced(theta, r, x0).ok().and_then(|(_, t)| t))
+            .collect();
+        Self {
+            model,
+            theta,
+            at,
+            recs,
+            initial,
+            traces,
+        }
+    }
+
+    /// The outputs with the change at `time` \[s\], scanned within `window` (widened to hold
+    /// θ's own time and `time`), as [`simulate_all`] gives them: `None` where a recording
+    /// does not simulate finitely.
+    pub(super) fn at(&self, time: f64, window: (f64, f64)) -> Option<Outputs> {
+        use rayon::prelude::*;
+        let mut th = self.theta.to_vec();
+        th[self.at] = time;
+        let own = self.theta[self.at];
+        let window = (window.0.min(own).min(time), window.1.max(own).max(time));
+        self.recs
+            .par_iter()
+            .zip(self.initial)
+            .zip(&self.traces)
+            .map(|((r, x0), trace)| {
+                let y = match trace {
+                    Some(tr) => self.model.resumed(&th, r, x0, tr, window),
+                    None => self.model.simulate(&th, r, x0),
+                }
+                .ok()?;
+                let [v, w]: [Vec<f64>; 2] = y.try_into().ok()?;
+                (v.iter().chain(&w).all(|x| x.is_finite()) && v.len() == r.len()).then_some([v, w])
+            })
+            .collect()
+    }
 }
 
 /// Σ_c w_c² Σ_k (y − ŷ)² over every sample of every recording.

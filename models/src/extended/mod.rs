@@ -43,10 +43,13 @@ use crate::{dynamics, regressor};
 
 mod differences;
 mod found;
+mod resume;
 mod traction;
 mod wheels;
 
 pub use found::Found;
+use resume::Tape;
+pub use resume::Trace;
 
 /// Shortest time constant θ1/θ4, θ2/θ6 the extended model accepts \[s\].
 pub const MIN_TIME_CONSTANT: f64 = 1e-3;
@@ -581,6 +584,25 @@ impl Extended {
         rec: &Recording,
         initial: &[f64],
     ) -> Result<[Vec<f64>; N]> {
+        let (y, grid, index, avg) =
+            self.integrate_taped::<N, M>(th0, ph, forces, rec, initial, &mut Tape::Off)?;
+        Ok(to_samples(&y, &grid, &index, avg))
+    }
+
+    /// [`Self::integrate`] before [`to_samples`]: the values at every instant of the merged
+    /// grid, the grid, the samples' places in it and whether they are window averages; with
+    /// `tape` recording the state at every instant, or resuming from a recorded one
+    /// ([`resume`]).
+    #[allow(clippy::type_complexity)]
+    fn integrate_taped<const N: usize, const M: usize>(
+        &self,
+        th0: &[f64; 6],
+        ph: &Terms,
+        forces: &Forces,
+        rec: &Recording,
+        initial: &[f64],
+        tape: &mut Tape<'_, N, M>,
+    ) -> Result<([Vec<f64>; N], Vec<f64>, Vec<usize>, bool)> {
         let sens = M > 0;
         let run = Run::new(self.track, th0, ph, rec, initial)?;
         let (v0, w0, hold, pipe, grid) = (run.v0, run.w0, run.hold, &run.pipe, &run.grid);
@@ -626,7 +648,8 @@ impl Extended {
             v.push(z[c]);
             v
         });
-        for i in 1..m {
+        let first = tape.start(grid, &mut z, &mut setpoint, &mut y);
+        for i in first..m {
             let (ta, tb) = (grid[i - 1], grid[i]);
             let span = tb - ta;
             let (th, inv, changed) = run.in_force(ta, tb, before, after);
@@ -647,8 +670,14 @@ impl Extended {
             for (c, yc) in y.iter_mut().enumerate() {
                 yc.push(if run.avg { q[c] / span } else { z[c] });
             }
+            if tape.after(grid, i, &z, &setpoint, &mut y) {
+                break;
+            }
         }
-        Ok(to_samples(&y, grid, &run.index, run.avg))
+        let Run {
+            grid, index, avg, ..
+        } = run;
+        Ok((y, grid, index, avg))
     }
 }
 
