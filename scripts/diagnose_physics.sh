@@ -117,7 +117,12 @@
 # window_end; single, clean) and clean 5671-5770, at 0311cad's method; run once at 0311cad's
 # method (binary of 59fce3b's tree), then their misses were looked at; the next report,
 # declared before it runs, is 1093-1096 (pairs window_end; single, clean) and clean 5771-5870
-# at the method of acc7230 (a split held beside another effect's not offered for freeing).
+# at the method of acc7230 (a split held beside another effect's not offered for freeing);
+# run once at that method (binary of 617e8c4's tree; 1093-1094's singles cut off at 70 of 156
+# runs by a session's end and rerun whole, unread, with the same binary); the next report,
+# declared before it runs, is 1097-1100 (pairs window_end; single, clean) and clean
+# 5871-5970 at that method (555f292's resumed change-time scans and the screen's reused
+# level cost change no number).
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions

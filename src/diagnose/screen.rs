@@ -71,13 +71,17 @@ pub(super) fn start_candidate(
     {
         theta = joint;
     }
-    // A limit's probe level is a rough reading of the data: scaled on a grid first.
+    // A limit's probe level is a rough reading of the data: scaled on a grid first (its
+    // least cost kept: the start's, unless θ moves after it).
+    let mut screened = None;
     if search.is_limit() {
         // The probed levels only (a limit may have a parameter that is no level, as a mix).
         let active: Vec<usize> = (nominee.pattern.param_of_col.iter().copied())
             .filter(|j| !nominee.pattern.inactive.contains(j))
             .collect();
-        theta = level_grid(&theta, base, &active, &training_cost);
+        let (scaled, cost) = level_grid(&theta, base, &active, &training_cost, None);
+        theta = scaled;
+        screened = Some((theta.clone(), cost));
     }
     // A dead time is searched on a grid first: its cost has many local minima.
     if search == Search::DeadTime {
@@ -100,7 +104,10 @@ pub(super) fn start_candidate(
     if search == Search::ChangeTime {
         pinned.push(base);
     }
-    let cost = training_cost(&theta);
+    let cost = match screened {
+        Some((th, cost)) if same_bits(&th, &theta) => cost,
+        _ => training_cost(&theta),
+    };
     Ok(Start {
         theta,
         bounds,
@@ -249,20 +256,28 @@ pub(super) fn scaled(
     th
 }
 
-/// A limit's level scaled by the best of a few factors (0.5…2) by `cost`.
+/// A limit's level scaled by the best of a few factors (0.5…2) by `cost`, with its cost;
+/// `known`: the cost at `theta` itself where it has been computed (scale 1 is `theta` to the
+/// bit, so it is not simulated again).
 pub(super) fn level_grid(
     theta: &[f64],
     base: usize,
     active: &[usize],
     cost: &(dyn Fn(&[f64]) -> f64 + Sync),
-) -> Vec<f64> {
+    known: Option<f64>,
+) -> (Vec<f64>, f64) {
     // One simulation per scale, on as many threads (an expensive model's start is the last to
     // finish while the other candidates' are done).
     let scales = [1.0, 0.5, 0.7, 0.85, 1.2, 1.5, 2.0];
     let costs: Vec<f64> = std::thread::scope(|sc| {
         let handles: Vec<_> = scales
             .iter()
-            .map(|&f| sc.spawn(move || cost(&scaled(theta, base, active, f, 1.0))))
+            .map(|&f| {
+                sc.spawn(move || match known {
+                    Some(c) if f == 1.0 => c,
+                    _ => cost(&scaled(theta, base, active, f, 1.0)),
+                })
+            })
             .collect();
         handles
             .into_iter()
@@ -275,7 +290,13 @@ pub(super) fn level_grid(
             best = (c, f);
         }
     }
-    scaled(theta, base, active, best.1, 1.0)
+    (scaled(theta, base, active, best.1, 1.0), best.0)
+}
+
+/// Whether two parameter vectors are the same to the bit (a cost computed at one is the
+/// other's).
+fn same_bits(a: &[f64], b: &[f64]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
 }
 
 #[cfg(test)]
