@@ -261,19 +261,12 @@ mod tests {
 
     /// 100 s at 50 Hz of a two-tone drive, commands held, instants or window averages.
     fn recording(avg: bool) -> Recording {
-        let n = 5001;
-        let t: Vec<f64> = (0..n).map(|k| k as f64 * 0.02).collect();
-        let vr = t.iter().map(|&x| 0.3 + 0.25 * (1.3 * x).sin()).collect();
-        let wr = t
-            .iter()
-            .map(|&x| 0.8 * (0.7 * x).cos() - 0.3 * (2.3 * x).sin())
-            .collect();
-        let mut rec = Recording::new("x", t, vr, wr, vec![0.0; n], vec![0.0; n]).expect("valid");
-        rec.set_meta("command_hold", "zoh");
-        if avg {
-            rec.set_meta("velocity_sampling", "window_average");
-        }
-        rec
+        super::super::tests::recording_at(avg, 5001, 0.02, |x| {
+            (
+                0.3 + 0.25 * (1.3 * x).sin(),
+                0.8 * (0.7 * x).cos() - 0.3 * (2.3 * x).sin(),
+            )
+        })
     }
 
     /// A payload change's time scanned across (40, 55) s: every resumed run is the whole

@@ -8,7 +8,18 @@ use wheelid_core::WheelTerms;
 const THETA: [f64; 6] = [0.26, 0.25, -0.05, 0.9965, 0.08, 1.0768];
 
 fn recording(avg: bool, n: usize, f: impl Fn(f64) -> (f64, f64)) -> Recording {
-    let t: Vec<f64> = (0..n).map(|k| k as f64 * 0.1).collect();
+    recording_at(avg, n, 0.1, f)
+}
+
+/// `n` samples `dt` \[s\] apart of the commands `f`(t), held, the velocities zero; window
+/// averages with `avg`, else instants.
+pub(super) fn recording_at(
+    avg: bool,
+    n: usize,
+    dt: f64,
+    f: impl Fn(f64) -> (f64, f64),
+) -> Recording {
+    let t: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
     let (vr, wr): (Vec<f64>, Vec<f64>) = t.iter().map(|&x| f(x)).unzip();
     let mut rec = Recording::new("x", t, vr, wr, vec![0.0; n], vec![0.0; n]).expect("valid");
     rec.set_meta("command_hold", "zoh");
