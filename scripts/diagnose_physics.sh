@@ -122,7 +122,8 @@
 # runs by a session's end and rerun whole, unread, with the same binary); the next report,
 # declared before it runs, is 1097-1100 (pairs window_end; single, clean) and clean
 # 5871-5970 at that method (555f292's resumed change-time scans and the screen's reused
-# level cost change no number).
+# level cost change no number); started at 4753aff (binary of its tree), 1097-1098's pairs read
+# (README), the rest still running at a session's end.
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
