@@ -136,10 +136,8 @@ impl<'a> TimeScan<'a> {
                 let y = match trace {
                     Some(tr) => self.model.resumed(&th, r, x0, tr, window),
                     None => self.model.simulate(&th, r, x0),
-                }
-                .ok()?;
-                let [v, w]: [Vec<f64>; 2] = y.try_into().ok()?;
-                (v.iter().chain(&w).all(|x| x.is_finite()) && v.len() == r.len()).then_some([v, w])
+                };
+                score::checked(y.ok()?, r)
             })
             .collect()
     }

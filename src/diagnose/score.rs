@@ -46,12 +46,14 @@ pub(crate) fn simulate_all(
     use rayon::prelude::*;
     recs.par_iter()
         .zip(initial)
-        .map(|(r, x0)| {
-            let y = model.simulate(theta, r, x0).ok()?;
-            let [v, w]: [Vec<f64>; 2] = y.try_into().ok()?;
-            (v.iter().chain(&w).all(|x| x.is_finite()) && v.len() == r.len()).then_some([v, w])
-        })
+        .map(|(r, x0)| checked(model.simulate(theta, r, x0).ok()?, r))
         .collect()
+}
+
+/// A simulation of `rec` as two channels, `None` unless both are finite and as long as it.
+pub(crate) fn checked(y: wheelid_core::Simulation, rec: &Recording) -> Option<[Vec<f64>; 2]> {
+    let [v, w]: [Vec<f64>; 2] = y.try_into().ok()?;
+    (v.iter().chain(&w).all(|x| x.is_finite()) && v.len() == rec.len()).then_some([v, w])
 }
 
 /// The rows of a fit: the training samples of each recording, both channels, weighted 1/σ_c.
