@@ -9,7 +9,7 @@
 #[path = "../examples/diagnose_physics/main.rs"]
 mod harness;
 
-use harness::{Record, RunSpec, exactly_right, parse_seeds, run_all};
+use harness::{Record, RunSpec, exactly_right, parse_seeds, read_records, report, run_all};
 use wheelid::core::Timing;
 
 /// One run of `profile` with the physics `effects` over `duration_s`, its record printed.
@@ -108,6 +108,33 @@ fn a_clean_and_a_latency_run_of_the_khepera_complete_and_the_latency_is_a_mismat
     ));
     assert!(exactly_right(&[], &[]));
     assert_eq!(parse_seeds("1..3").expect("seeds"), [1, 2, 3]);
+    pooled_records_give_the_runs_report(&recs);
+}
+
+/// `--pool`: the records written as `--json` lines (one per file here) read back give the
+/// same report as the run's own; a non-finite number (written `null`) reads back as NaN.
+fn pooled_records_give_the_runs_report(recs: &[Record]) {
+    let dir = std::env::temp_dir().join(format!("wheelid-pool-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let mut odd = recs[1].clone();
+    odd.diagnose_s = f64::NAN;
+    let paths: Vec<_> = [&recs[0], &recs[1], &odd]
+        .iter()
+        .enumerate()
+        .map(|(i, r)| {
+            let path = dir.join(format!("{i}.jsonl"));
+            let line = serde_json::to_string(r).expect("record as JSON");
+            std::fs::write(&path, format!("{line}\n\n")).expect("write");
+            path
+        })
+        .collect();
+    let back = read_records(&paths).expect("records read back");
+    std::fs::remove_dir_all(&dir).ok();
+    assert_eq!(back.len(), 3);
+    assert!(back[2].diagnose_s.is_nan());
+    assert_eq!(report(&back[..2], 1.0), report(recs, 1.0));
+    assert_eq!(back[1].named_params, recs[1].named_params);
+    assert_eq!(back[1].fit_final.w.to_bits(), recs[1].fit_final.w.to_bits());
 }
 
 /// Tuning seed 2 of the harness, the Pioneer-like robot's amplifiers clamped at the voltage the

@@ -34,7 +34,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use clap::Parser;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use statrs::distribution::{Beta, ContinuousCDF};
 use wheelid::core::{Recording, Timing};
 use wheelid::diagnose::{DiagnoseSettings, diagnose};
@@ -48,9 +48,12 @@ use wheelid::robots::physics::{
 // this one as a module.
 #[path = "draw.rs"]
 mod draw;
+#[path = "pool.rs"]
+mod pool;
 #[path = "report.rs"]
 mod report;
 pub use draw::*;
+pub use pool::*;
 pub use report::*;
 
 /// THE table: for each physics effect (`PhysicsEffects::active` names), the diagnosis
@@ -202,7 +205,7 @@ pub fn default_duration(profile: &str) -> f64 {
 }
 
 /// A comparison of an estimated magnitude with the truth.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Magnitude {
     /// The physics effect.
     pub effect: String,
@@ -217,16 +220,18 @@ pub struct Magnitude {
 }
 
 /// Validation fit % of both channels.
-#[derive(Debug, Clone, Copy, Serialize, Default)]
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, Default)]
 pub struct Fits {
     /// Forward velocity [%].
+    #[serde(deserialize_with = "f64_or_nan")]
     pub v: f64,
     /// Angular velocity [%].
+    #[serde(deserialize_with = "f64_or_nan")]
     pub w: f64,
 }
 
 /// What one run gave.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Record {
     /// Profile.
     pub profile: String,
@@ -239,18 +244,23 @@ pub struct Record {
     /// Seed.
     pub seed: u64,
     /// Duration \[s\].
+    #[serde(deserialize_with = "f64_or_nan")]
     pub duration_s: f64,
     /// Jitter.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub jitter: f64,
     /// The true physics effects.
     pub truth: Vec<String>,
     /// Their settings and how strongly they were predicted to act (per effect).
+    #[serde(deserialize_with = "params_or_nan")]
     pub truth_params: BTreeMap<String, BTreeMap<String, f64>>,
     /// The candidates the diagnosis named (findings, in order).
     pub named: Vec<String>,
     /// Their fitted parameters.
+    #[serde(deserialize_with = "params_or_nan")]
     pub named_params: BTreeMap<String, BTreeMap<String, f64>>,
     /// Their standard errors (a change time: the half width of its interval).
+    #[serde(deserialize_with = "params_or_nan")]
     pub named_std_err: BTreeMap<String, BTreeMap<String, f64>>,
     /// The candidates fitted and turned down, with why.
     pub rejected: Vec<(String, String)>,
@@ -265,6 +275,7 @@ pub struct Record {
     pub fit_nominal: Fits,
     /// The nominal model's validation residual RMS over the noise floor, (v, ω) (the
     /// diagnosis's `noise_ratio`; at most 1: θ has absorbed the effect down to the noise).
+    #[serde(deserialize_with = "pair_or_nan")]
     pub noise_ratio_nominal: [f64; 2],
     /// Final model's validation fit.
     pub fit_final: Fits,
@@ -275,8 +286,10 @@ pub struct Record {
     /// clean run).
     pub visibility: Fits,
     /// Largest speed of the chassis from the pose columns [m/s].
+    #[serde(deserialize_with = "f64_or_nan")]
     pub pose_speed_max: f64,
     /// Largest |v| the encoders report [m/s].
+    #[serde(deserialize_with = "f64_or_nan")]
     pub encoder_speed_max: f64,
     /// The chassis moved far faster than its wheels ever turned (pose speed > 1.5 × the
     /// encoders' largest |v| + 5 % of v_max): the backend did not realise the effect physically.
@@ -290,8 +303,10 @@ pub struct Record {
     /// also reported apart.
     pub masked: Vec<String>,
     /// Simulation wall time \[s\].
+    #[serde(deserialize_with = "f64_or_nan")]
     pub simulate_s: f64,
     /// Diagnosis wall time \[s\].
+    #[serde(deserialize_with = "f64_or_nan")]
     pub diagnose_s: f64,
     /// The error, if the run failed (then nothing else is meaningful).
     pub error: Option<String>,
@@ -705,6 +720,10 @@ pub struct Args {
     /// (`DiagnoseSettings::search_samples`; default: the diagnosis's own).
     #[arg(long)]
     pub search_samples: Option<usize>,
+    /// Run nothing: print the report of the records in these `--json` files pooled (e.g. a
+    /// declared report run in parts); the wall time printed is then the sum of the runs'.
+    #[arg(long, num_args = 1.., value_name = "JSON")]
+    pub pool: Option<Vec<PathBuf>>,
 }
 
 /// The runs `a` asks for: profile × convention × case × seed.
@@ -762,6 +781,12 @@ pub fn plan(a: &Args) -> Result<Vec<RunSpec>> {
 
 fn main() -> Result<()> {
     let a = Args::parse();
+    if let Some(paths) = &a.pool {
+        let recs = read_records(paths)?;
+        let wall: f64 = recs.iter().map(|r| r.simulate_s + r.diagnose_s).sum();
+        print!("{}", report(&recs, wall));
+        return Ok(());
+    }
     let specs = plan(&a)?;
     let json = match &a.json {
         Some(path) => Some(Mutex::new(std::io::BufWriter::new(
