@@ -18,6 +18,10 @@ pub(super) struct Pattern {
     pub(super) evidence: String,
     /// Bonferroni factor (grid of payload times).
     pub(super) grid: usize,
+    /// The training cost ‖e‖² of the model in hand with the candidate at `guess`, where the
+    /// probe simulated exactly that (a limit probed at one level): the screen's level grid
+    /// takes it as its scale 1 instead of simulating θ again ([`super::screen::level_grid`]).
+    pub(super) guess_cost: Option<f64>,
 }
 
 /// Builds the fingerprints of `c` at the current model from its [`Probe`]; `None` if the
@@ -50,6 +54,7 @@ pub(super) fn patterns(c: Candidate, data: &Data, cur: &Current) -> Option<Vec<P
             inactive: Vec::new(),
             evidence,
             grid: 1,
+            guess_cost: None,
         };
     match c.effect().probe(&data.probe_data(cur))? {
         Probe::Gradient(steps) => {
@@ -72,17 +77,24 @@ pub(super) fn patterns(c: Candidate, data: &Data, cur: &Current) -> Option<Vec<P
                 for &(j, level) in &levels {
                     v[j] = f * level;
                 }
+                // One level probed alone: its column's simulation is the guess's own.
+                let mut guess_cost = None;
                 let cols = params
                     .iter()
                     .map(|&j| {
                         let mut one = null.clone();
                         one[j] = v[j];
-                        with(&one).map(|y| frame.flatten(&score::difference(&y, &cur.sim, 1.0)))
+                        let y = with(&one)?;
+                        if params.len() == 1 {
+                            guess_cost = Some(frame.residuals(&y).norm_squared());
+                        }
+                        Some(frame.flatten(&score::difference(&y, &cur.sim, 1.0)))
                     })
                     .collect::<Option<Vec<_>>>()?;
                 let mut p = single(cols, params.clone(), evidence.clone());
                 p.guess = v;
                 p.grid = PROBE_FRACTIONS.len();
+                p.guess_cost = guess_cost;
                 Some(p)
             };
             PROBE_FRACTIONS

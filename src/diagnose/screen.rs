@@ -79,7 +79,14 @@ pub(super) fn start_candidate(
         let active: Vec<usize> = (nominee.pattern.param_of_col.iter().copied())
             .filter(|j| !nominee.pattern.inactive.contains(j))
             .collect();
-        let (scaled, cost) = level_grid(&theta, base, &active, &training_cost, None);
+        // The probe simulated the guess itself where it probed one level: its cost is known
+        // wherever θ is still that guess to the bit.
+        let at_guess = [&cur.theta[..], &nominee.pattern.guess[..]].concat();
+        let known = nominee
+            .pattern
+            .guess_cost
+            .filter(|_| same_bits(&theta, &at_guess));
+        let (scaled, cost) = level_grid(&theta, base, &active, &training_cost, known);
         theta = scaled;
         screened = Some((theta.clone(), cost));
     }
@@ -324,5 +331,64 @@ mod tests {
         assert!(idle_limit(&recs, rate, &[1.5, 5.0], |j| j == 1).is_some());
         // No limit: never idle.
         assert!(idle_limit(&recs, Candidate::INPUT_DELAY, &[0.1], free).is_none());
+    }
+
+    /// A limit probed at one level simulated its guess itself (`Pattern::guess_cost`): that
+    /// cost is the training cost simulated anew at the screen's θ to the bit, so the level grid
+    /// takes it as its scale 1. The simulator's Khepera III, 60 s with the velocity saturated.
+    #[test]
+    fn a_limit_probed_at_one_level_hands_its_cost_to_the_screen() {
+        use wheelid_robots::effects::{Effects, VelocitySaturation};
+        use wheelid_robots::{RobotProfile, SimSettings, simulate_recording};
+        let robot = RobotProfile::khepera3();
+        let exc = robot.multisine(3).expect("valid multisine");
+        let effects = Effects {
+            velocity_saturation: Some(VelocitySaturation {
+                v_max: 0.35 * robot.v_max,
+                w_max: 10.0 * robot.w_max,
+            }),
+            ..Effects::default()
+        };
+        let sim = SimSettings {
+            duration_s: 60.0,
+            seed: 3,
+            effects,
+            ..SimSettings::default()
+        };
+        let rec = simulate_recording(&robot, &exc, &sim).expect("simulates");
+        let settings = DiagnoseSettings::default();
+        let (data, fit) = prepare(&[rec], &wheelid_models::VwPd, &settings).expect("prepared");
+        let y = simulate_all(&data.model(&[]), &fit.theta, &data.recs, &fit.initial)
+            .expect("nominal simulates");
+        let cur = Current {
+            candidates: Vec::new(),
+            pinned: Vec::new(),
+            theta: fit.theta.clone(),
+            std_err: fit.std_err.clone(),
+            covariance: fit.covariance.clone(),
+            initial: fit.initial.clone(),
+            sim: y,
+            jacobian: None,
+        };
+        let mut known = 0;
+        for c in [Candidate::VELOCITY_SATURATION, Candidate::EFFORT_CLAMP] {
+            let model = data.model(&[c]);
+            for p in patterns(c, &data, &cur).expect("the limit acts") {
+                let Some(cost) = p.guess_cost else { continue };
+                let th = [&cur.theta[..], &p.guess[..]].concat();
+                let anew = simulate_all(&model, &th, &data.recs, &cur.initial)
+                    .map(|y| data.frame().residuals(&y).norm_squared())
+                    .expect("simulates");
+                assert_eq!(
+                    cost.to_bits(),
+                    anew.to_bits(),
+                    "{}: {cost} vs {anew}",
+                    c.name()
+                );
+                known += 1;
+            }
+        }
+        // The saturation binds in v alone: one level, probed at three fractions.
+        assert!(known >= 3, "{known} patterns kept their guess's cost");
     }
 }
