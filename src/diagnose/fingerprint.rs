@@ -18,10 +18,11 @@ pub(super) struct Pattern {
     pub(super) evidence: String,
     /// Bonferroni factor (grid of payload times).
     pub(super) grid: usize,
-    /// The training cost ‖e‖² of the model in hand with the candidate at `guess`, where the
-    /// probe simulated exactly that (a limit probed at one level): the screen's level grid
-    /// takes it as its scale 1 instead of simulating θ again ([`super::screen::level_grid`]).
-    pub(super) guess_cost: Option<f64>,
+    /// The candidate's values the probe simulated as they are, with the training cost ‖e‖² of
+    /// the model in hand beside them there (a limit probed at one level: one per probe
+    /// fraction, the guess among them): the screen's level grid takes a scale's cost from here
+    /// where its θ is one of them to the bit ([`super::screen::level_grid`]).
+    pub(super) probed: Vec<(Vec<f64>, f64)>,
 }
 
 /// Builds the fingerprints of `c` at the current model from its [`Probe`]; `None` if the
@@ -54,7 +55,7 @@ pub(super) fn patterns(c: Candidate, data: &Data, cur: &Current) -> Option<Vec<P
             inactive: Vec::new(),
             evidence,
             grid: 1,
-            guess_cost: None,
+            probed: Vec::new(),
         };
     match c.effect().probe(&data.probe_data(cur))? {
         Probe::Gradient(steps) => {
@@ -78,7 +79,7 @@ pub(super) fn patterns(c: Candidate, data: &Data, cur: &Current) -> Option<Vec<P
                     v[j] = f * level;
                 }
                 // One level probed alone: its column's simulation is the guess's own.
-                let mut guess_cost = None;
+                let mut probed = Vec::new();
                 let cols = params
                     .iter()
                     .map(|&j| {
@@ -86,7 +87,7 @@ pub(super) fn patterns(c: Candidate, data: &Data, cur: &Current) -> Option<Vec<P
                         one[j] = v[j];
                         let y = with(&one)?;
                         if params.len() == 1 {
-                            guess_cost = Some(frame.residuals(&y).norm_squared());
+                            probed.push((one, frame.residuals(&y).norm_squared()));
                         }
                         Some(frame.flatten(&score::difference(&y, &cur.sim, 1.0)))
                     })
@@ -94,13 +95,18 @@ pub(super) fn patterns(c: Candidate, data: &Data, cur: &Current) -> Option<Vec<P
                 let mut p = single(cols, params.clone(), evidence.clone());
                 p.guess = v;
                 p.grid = PROBE_FRACTIONS.len();
-                p.guess_cost = guess_cost;
+                p.probed = probed;
                 Some(p)
             };
-            PROBE_FRACTIONS
+            let mut all = PROBE_FRACTIONS
                 .par_iter()
                 .map(|&f| at(f))
-                .collect::<Option<Vec<_>>>()
+                .collect::<Option<Vec<_>>>()?;
+            // Each fraction's pattern carries every fraction's simulated cost.
+            let probed: Vec<(Vec<f64>, f64)> =
+                all.iter().flat_map(|p| p.probed.iter().cloned()).collect();
+            all.iter_mut().for_each(|p| p.probed.clone_from(&probed));
+            Some(all)
         }
         // A grid of change times over the middle of the run.
         Probe::TimeGrid { time, n, columns } => {

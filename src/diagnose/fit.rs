@@ -374,8 +374,8 @@ fn shortened_lags(
         }
     }
     let from = scaled(theta, base, active, best.1, best.2);
-    let known = best.0.is_finite().then_some(best.0);
-    level_grid(&from, base, active, &training_cost, known).0
+    let known = |th: &[f64]| (best.0.is_finite() && same_bits(th, &from)).then_some(best.0);
+    level_grid(&from, base, active, &training_cost, &known).0
 }
 
 /// χ²₁ at 0.95: the profile-likelihood interval of one parameter.

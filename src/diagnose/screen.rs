@@ -79,14 +79,16 @@ pub(super) fn start_candidate(
         let active: Vec<usize> = (nominee.pattern.param_of_col.iter().copied())
             .filter(|j| !nominee.pattern.inactive.contains(j))
             .collect();
-        // The probe simulated the guess itself where it probed one level: its cost is known
-        // wherever θ is still that guess to the bit.
-        let at_guess = [&cur.theta[..], &nominee.pattern.guess[..]].concat();
-        let known = nominee
-            .pattern
-            .guess_cost
-            .filter(|_| same_bits(&theta, &at_guess));
-        let (scaled, cost) = level_grid(&theta, base, &active, &training_cost, known);
+        // The probe simulated its fractions of the level: a scale whose θ is one of them to
+        // the bit has its cost already.
+        let probed = |th: &[f64]| {
+            let (held, own) = th.split_at(base.min(th.len()));
+            let same = |(vals, _): &&(Vec<f64>, f64)| same_bits(own, vals);
+            same_bits(held, &cur.theta)
+                .then(|| nominee.pattern.probed.iter().find(same).map(|&(_, c)| c))
+                .flatten()
+        };
+        let (scaled, cost) = level_grid(&theta, base, &active, &training_cost, &probed);
         theta = scaled;
         screened = Some((theta.clone(), cost));
     }
@@ -264,25 +266,25 @@ pub(super) fn scaled(
 }
 
 /// A limit's level scaled by the best of a few factors (0.5…2) by `cost`, with its cost;
-/// `known`: the cost at `theta` itself where it has been computed (scale 1 is `theta` to the
-/// bit, so it is not simulated again).
+/// `known`: the cost at a θ where it has been computed already (the same θ to the bit, so
+/// the simulation would give it again), `None` elsewhere.
 pub(super) fn level_grid(
     theta: &[f64],
     base: usize,
     active: &[usize],
     cost: &(dyn Fn(&[f64]) -> f64 + Sync),
-    known: Option<f64>,
+    known: &(dyn Fn(&[f64]) -> Option<f64> + Sync),
 ) -> (Vec<f64>, f64) {
-    // One simulation per scale, on as many threads (an expensive model's start is the last to
-    // finish while the other candidates' are done).
+    // One simulation per scale not known, on as many threads (an expensive model's start is
+    // the last to finish while the other candidates' are done).
     let scales = [1.0, 0.5, 0.7, 0.85, 1.2, 1.5, 2.0];
     let costs: Vec<f64> = std::thread::scope(|sc| {
         let handles: Vec<_> = scales
             .iter()
             .map(|&f| {
-                sc.spawn(move || match known {
-                    Some(c) if f == 1.0 => c,
-                    _ => cost(&scaled(theta, base, active, f, 1.0)),
+                sc.spawn(move || {
+                    let th = scaled(theta, base, active, f, 1.0);
+                    known(&th).unwrap_or_else(|| cost(&th))
                 })
             })
             .collect();
@@ -302,7 +304,7 @@ pub(super) fn level_grid(
 
 /// Whether two parameter vectors are the same to the bit (a cost computed at one is the
 /// other's).
-fn same_bits(a: &[f64], b: &[f64]) -> bool {
+pub(super) fn same_bits(a: &[f64], b: &[f64]) -> bool {
     a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
 }
 
@@ -333,9 +335,9 @@ mod tests {
         assert!(idle_limit(&recs, Candidate::INPUT_DELAY, &[0.1], free).is_none());
     }
 
-    /// A limit probed at one level simulated its guess itself (`Pattern::guess_cost`): that
-    /// cost is the training cost simulated anew at the screen's θ to the bit, so the level grid
-    /// takes it as its scale 1. The simulator's Khepera III, 60 s with the velocity saturated.
+    /// A limit probed at one level simulated its guesses themselves (`Pattern::probed`): each
+    /// cost kept is the training cost simulated anew at that θ to the bit, so the level grid
+    /// takes it where a scale lands on one. The simulator's Khepera III, 60 s with the velocity saturated.
     #[test]
     fn a_limit_probed_at_one_level_hands_its_cost_to_the_screen() {
         use wheelid_robots::effects::{Effects, VelocitySaturation};
@@ -374,21 +376,24 @@ mod tests {
         for c in [Candidate::VELOCITY_SATURATION, Candidate::EFFORT_CLAMP] {
             let model = data.model(&[c]);
             for p in patterns(c, &data, &cur).expect("the limit acts") {
-                let Some(cost) = p.guess_cost else { continue };
-                let th = [&cur.theta[..], &p.guess[..]].concat();
-                let anew = simulate_all(&model, &th, &data.recs, &cur.initial)
-                    .map(|y| data.frame().residuals(&y).norm_squared())
-                    .expect("simulates");
-                assert_eq!(
-                    cost.to_bits(),
-                    anew.to_bits(),
-                    "{}: {cost} vs {anew}",
-                    c.name()
-                );
-                known += 1;
+                assert!(p.probed.iter().any(|(g, _)| same_bits(g, &p.guess)));
+                for (vals, cost) in &p.probed {
+                    let th = [&cur.theta[..], &vals[..]].concat();
+                    let anew = simulate_all(&model, &th, &data.recs, &cur.initial)
+                        .map(|y| data.frame().residuals(&y).norm_squared())
+                        .expect("simulates");
+                    assert_eq!(
+                        cost.to_bits(),
+                        anew.to_bits(),
+                        "{}: {cost} vs {anew}",
+                        c.name()
+                    );
+                    known += 1;
+                }
             }
         }
-        // The saturation binds in v alone: one level, probed at three fractions.
-        assert!(known >= 3, "{known} patterns kept their guess's cost");
+        // The saturation binds in v alone: one level, probed at three fractions, each pattern
+        // carrying all three.
+        assert!(known >= 9, "{known} probed costs");
     }
 }

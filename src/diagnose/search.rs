@@ -823,7 +823,7 @@ mod tests {
                 inactive: Vec::new(),
                 evidence: String::new(),
                 grid: 1,
-                guess_cost: None,
+                probed: Vec::new(),
             },
             score: score::Score {
                 stat: 10.0,
