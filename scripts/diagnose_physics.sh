@@ -10,6 +10,8 @@
 # never looked at while tuning.
 #   TUNING                 seeds    1-20    look at these while tuning:  --seeds 1..20
 #   HOLD-OUT               seeds 1001-1100  report only:                 --seeds 1001..1100
+#   HOLD-OUT 2             seeds 1101-1200  report only (declared 2026-12-07, when 1001-1100
+#                                           were used up)
 #   CLEAN FALSE ALARMS     seeds 2001-2100  report only, --cases clean:  --seeds 2001..2100
 # Used up (looked at, now tuning-like): hold-out 1001-1006 (1001-1002 in tuning, 1003-1004
 # reported at 04cf35c, 1005-1006 after the noise-floor change of 2026-11-24); clean 2001-2100
@@ -122,8 +124,13 @@
 # runs by a session's end and rerun whole, unread, with the same binary); the next report,
 # declared before it runs, is 1097-1100 (pairs window_end; single, clean) and clean
 # 5871-5970 at that method (555f292's resumed change-time scans and the screen's reused
-# level cost change no number); started at 4753aff (binary of its tree), 1097-1098's pairs read
-# (README), the rest still running at a session's end.
+# level cost change no number); run once at that method (binary of 4753aff's tree; 1097-1098's
+# singles were cut off by a session's end, unread, and run again whole on 2026-12-07 with a
+# binary of the same tree; 1097-1098's pairs, whose records /tmp lost, were run again with it
+# for the pooled matrix: 256/264 again). That used up the hold-out seeds 1001-1100: the next
+# hold-out seeds are 1101-1200 (HOLD-OUT 2 above), clean ones from 5971 on; the next report,
+# declared before it runs, is 1101-1104 (pairs window_end; single, clean) and clean
+# 5971-6070 at the method then in hand.
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
@@ -133,6 +140,7 @@
 #   scripts/diagnose_physics.sh --seeds 1..3 --profiles khepera3 --conventions window_end \
 #     --cases all --threads 1
 #   scripts/diagnose_physics.sh --seeds 2001..2100 --cases clean --threads 2 --json clean.jsonl
+#   scripts/diagnose_physics.sh --pool h1097p.jsonl h1099p.jsonl   # one report of runs made apart
 #
 # Cost: a run is one physics simulation (~3-7 s for 60 s of the Khepera-like robot or 120 s of
 # the Pioneer-like one) plus the diagnosis (mostly < 1 s); a clean twin per seed is simulated
