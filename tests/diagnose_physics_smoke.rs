@@ -359,3 +359,17 @@ fn a_wheel_imbalance_is_named_once() {
     let r = pair("pioneer3dx", ["latency", "tyre_radius_right"], 1019);
     assert!(r.exactly_right, "{:?}", r.named);
 }
+
+/// Spent hold-out seed 1099 (after its report): on the Pioneer-like robot a 287 ms sensor
+/// delay beside a voltage clamp. The heading measures the delay (287.0 ± 0.1 ms); refitted in
+/// the dead time's place beside the clamp, the clamp's derivative term could not be told apart
+/// and was held, and then its level could not either: the fit failed, and the stand-in dead
+/// time stayed named. Each rank loss now holds what it names, until the fit runs.
+#[test]
+fn a_sensor_delay_beside_a_clamp_is_measured_when_the_clamp_loses_rank_twice() {
+    let r = pair("pioneer3dx", ["voltage_clamp", "sensor_delay"], 1099);
+    assert!(r.exactly_right, "{:?} {:?}", r.named, r.rejected);
+    let delay = r.named_params["output_delay"]["delay_s"];
+    let truth = r.truth_params["sensor_delay"]["sensor_delay_s"];
+    assert!((delay - truth).abs() <= 0.05 * truth, "{delay} vs {truth}");
+}
