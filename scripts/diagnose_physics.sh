@@ -128,9 +128,11 @@
 # singles were cut off by a session's end, unread, and run again whole on 2026-12-07 with a
 # binary of the same tree; 1097-1098's pairs, whose records /tmp lost, were run again with it
 # for the pooled matrix: 256/264 again). That used up the hold-out seeds 1001-1100: the next
-# hold-out seeds are 1101-1200 (HOLD-OUT 2 above), clean ones from 5971 on; the next report,
-# declared before it runs, is 1101-1104 (pairs window_end; single, clean) and clean
-# 5971-6070 at the method then in hand.
+# hold-out seeds are 1101-1200 (HOLD-OUT 2 above), clean ones from 5971 on. Then 1099's
+# Pioneer-like clamp + sensor delay was looked at (a rank loss held as often as it moves,
+# 9f2f5bf; on the cached 1099-1100: pairs 255 -> 256/264, one run changed, singles and clean
+# identical); the next report, declared before it runs, is 1101-1104 (pairs window_end;
+# single, clean) and clean 5971-6070 at 9f2f5bf's method.
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
