@@ -337,7 +337,8 @@ mod tests {
 
     /// A limit probed at one level simulated its guesses themselves (`Pattern::probed`): each
     /// cost kept is the training cost simulated anew at that θ to the bit, so the level grid
-    /// takes it where a scale lands on one. The simulator's Khepera III, 60 s with the velocity saturated.
+    /// takes it where a scale lands on one. The simulator's Khepera III, 60 s, the velocity
+    /// saturated.
     #[test]
     fn a_limit_probed_at_one_level_hands_its_cost_to_the_screen() {
         use wheelid_robots::effects::{Effects, VelocitySaturation};
