@@ -397,4 +397,30 @@ mod tests {
         // carrying all three.
         assert!(known >= 9, "{known} probed costs");
     }
+
+    /// The level grid simulates only the scales whose θ is not known: with the full level's
+    /// and its 0.7 and 0.85 scales known (as a probe's fractions leave them), four of the seven
+    /// scales are simulated, the known costs are used as given, and the least cost wins.
+    #[test]
+    fn the_level_grid_simulates_only_unknown_scales() {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        let theta = [0.3, 0.2, 0.0, 1.0, 0.0, 1.0, 0.4];
+        let calls = AtomicUsize::new(0);
+        // A cost least at level 0.4 × 0.7 (known, so only the known cost can make it win).
+        let cost = |th: &[f64]| {
+            calls.fetch_add(1, Ordering::Relaxed);
+            (th[6] - 0.28).abs() + 1.0
+        };
+        let known_at = [1.0, 0.7, 0.85].map(|f| scaled(&theta, 6, &[0], f, 1.0));
+        let known = |th: &[f64]| {
+            known_at
+                .iter()
+                .position(|k| same_bits(k, th))
+                .map(|i| [5.0, 0.5, 4.0][i])
+        };
+        let (best, c) = level_grid(&theta, 6, &[0], &cost, &known);
+        assert_eq!(calls.load(Ordering::Relaxed), 4);
+        assert_eq!(c, 0.5);
+        assert!(same_bits(&best, &known_at[1]));
+    }
 }
