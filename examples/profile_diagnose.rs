@@ -10,15 +10,13 @@
 use std::sync::Mutex;
 use std::time::Instant;
 
-use wheelid::core::Recording;
 use wheelid::diagnose::{DiagnoseSettings, diagnose_observed};
 use wheelid::models::VwPd;
 use wheelid::observer::Observer;
-use wheelid::robots::effects::{
-    AccelerationLimit, CoulombFriction, Effects, GainDrift, InputDelay, PayloadChange, Slip,
-    VelocitySaturation, WheelAsymmetry,
-};
-use wheelid::robots::{RobotProfile, SimSettings, simulate_recording};
+
+#[path = "../benches/support/diagnose_cases.rs"]
+mod diagnose_cases;
+use diagnose_cases::{cases, expected, recording};
 
 /// Prints each new message with the time since the diagnosis began.
 struct Clock {
@@ -34,115 +32,6 @@ impl Observer for Clock {
             message.clone_into(&mut last);
         }
     }
-}
-
-fn recording(effects: Effects) -> Recording {
-    let robot = RobotProfile::khepera3();
-    let exc = robot.multisine(3).expect("valid multisine");
-    let s = SimSettings {
-        duration_s: 600.0,
-        seed: 3,
-        effects,
-        ..SimSettings::default()
-    };
-    simulate_recording(&robot, &exc, &s).expect("simulates")
-}
-
-/// The bench's cases (`benches/diagnose.rs`), by name.
-fn cases() -> Vec<(&'static str, Effects)> {
-    let robot = RobotProfile::khepera3();
-    let (va, wa) = (0.25 * robot.v_max, 0.25 * robot.w_max);
-    let delay = InputDelay { delay_s: 0.08 };
-    let saturation = VelocitySaturation {
-        v_max: 1.4 * va,
-        w_max: 0.55 * wa,
-    };
-    let accel = AccelerationLimit {
-        v_accel_max: 0.1,
-        w_accel_max: 2.26,
-    };
-    let asymmetry = WheelAsymmetry { ratio: 1.08 };
-    let e = Effects::default;
-    vec![
-        ("clean", e()),
-        (
-            "dead_time",
-            Effects {
-                input_delay: Some(delay),
-                ..e()
-            },
-        ),
-        (
-            "acceleration_limit",
-            Effects {
-                acceleration_limit: Some(accel),
-                ..e()
-            },
-        ),
-        (
-            "velocity_saturation",
-            Effects {
-                velocity_saturation: Some(saturation),
-                ..e()
-            },
-        ),
-        (
-            "coulomb_friction",
-            Effects {
-                coulomb_friction: Some(CoulombFriction {
-                    v_coulomb: 0.08 * va,
-                    w_coulomb: 0.08 * wa,
-                }),
-                ..e()
-            },
-        ),
-        (
-            "wheel_asymmetry",
-            Effects {
-                wheel_asymmetry: Some(asymmetry),
-                ..e()
-            },
-        ),
-        (
-            "payload_change",
-            Effects {
-                payload_change: Some(PayloadChange::scaled(300.0, robot.theta, 1.5)),
-                ..e()
-            },
-        ),
-        (
-            "gain_drift",
-            Effects {
-                gain_drift: Some(GainDrift {
-                    rate_per_s: -0.3 / 600.0,
-                }),
-                ..e()
-            },
-        ),
-        (
-            "slip",
-            Effects {
-                slip: Some(Slip { k_v: 0.3, k_w: 0.3 }),
-                ..e()
-            },
-        ),
-        (
-            "dead_time+saturation",
-            Effects {
-                input_delay: Some(delay),
-                velocity_saturation: Some(saturation),
-                ..e()
-            },
-        ),
-        (
-            "acceleration_limit+asymmetry",
-            Effects {
-                acceleration_limit: Some(accel),
-                wheel_asymmetry: Some(asymmetry),
-                ..e()
-            },
-        ),
-    ]
 }
 
 fn main() {
@@ -173,6 +62,11 @@ fn main() {
         match diagnose_observed(std::slice::from_ref(&rec), &VwPd, &settings, &clock) {
             Ok(d) => {
                 let found: Vec<&str> = d.findings.iter().map(|f| f.effect.as_str()).collect();
+                let mut sorted = found.clone();
+                sorted.sort_unstable();
+                if sorted != expected(name) {
+                    println!("  (the bench expects {:?})", expected(name));
+                }
                 println!(
                     "  {:7.3} s  done: {found:?}; rejected {:?}",
                     clock.start.elapsed().as_secs_f64(),

@@ -264,41 +264,7 @@ pub fn online_text(trace: &crate::run::OnlineTrace, id: &Identification) -> Stri
             ),
         };
     }
-    for c in &trace.batch_checks {
-        let _ = match &c.outcome {
-            Ok((th, w)) => writeln!(
-                s,
-                "  batch check of the first {:.1} s ({} samples): θ1, θ2, θ4, θ6 = [{}], \
-                 intervals ± {:.2} %",
-                c.started_s,
-                c.samples,
-                th.map(|x| format!("{x:.4}")).join(", "),
-                100.0 * w
-            ),
-            Err(why) => writeln!(
-                s,
-                "  batch check of the first {:.1} s: no answer ({why})",
-                c.started_s
-            ),
-        };
-    }
-    for r in &trace.redesigns {
-        let th = r.theta.map(|x| format!("{x:.4}")).join(", ");
-        let _ = match &r.outcome {
-            Ok((from, f)) => writeln!(
-                s,
-                "  re-designed at {:.1} s for θ̂ = [{th}] from ({:.2}, {:.2}) m: lines to {f:.2} Hz \
-                 from {from:.1} s",
-                r.started_s, r.start_pose[0], r.start_pose[1]
-            ),
-            Err(why) => writeln!(
-                s,
-                "  re-design at {:.1} s for θ̂ = [{th}] from ({:.2}, {:.2}) m: none ({why}); the \
-                 commands went on",
-                r.started_s, r.start_pose[0], r.start_pose[1]
-            ),
-        };
-    }
+    online_checks(&mut s, trace);
     let (Some(th), Some(se)) = (trace.theta.last(), trace.std_err.last()) else {
         return s;
     };
@@ -338,6 +304,46 @@ pub fn online_text(trace: &crate::run::OnlineTrace, id: &Identification) -> Stri
         }
     );
     s
+}
+
+/// The batch checks and re-designs of an online run, one line each ([`online_text`]).
+fn online_checks(s: &mut String, trace: &crate::run::OnlineTrace) {
+    use std::fmt::Write as _;
+    for c in &trace.batch_checks {
+        let _ = match &c.outcome {
+            Ok((th, w)) => writeln!(
+                s,
+                "  batch check of the first {:.1} s ({} samples): θ1, θ2, θ4, θ6 = [{}], \
+                 intervals ± {:.2} %",
+                c.started_s,
+                c.samples,
+                th.map(|x| format!("{x:.4}")).join(", "),
+                100.0 * w
+            ),
+            Err(why) => writeln!(
+                s,
+                "  batch check of the first {:.1} s: no answer ({why})",
+                c.started_s
+            ),
+        };
+    }
+    for r in &trace.redesigns {
+        let th = r.theta.map(|x| format!("{x:.4}")).join(", ");
+        let _ = match &r.outcome {
+            Ok((from, f)) => writeln!(
+                s,
+                "  re-designed at {:.1} s for θ̂ = [{th}] from ({:.2}, {:.2}) m: lines to {f:.2} Hz \
+                 from {from:.1} s",
+                r.started_s, r.start_pose[0], r.start_pose[1]
+            ),
+            Err(why) => writeln!(
+                s,
+                "  re-design at {:.1} s for θ̂ = [{th}] from ({:.2}, {:.2}) m: none ({why}); the \
+                 commands went on",
+                r.started_s, r.start_pose[0], r.start_pose[1]
+            ),
+        };
+    }
 }
 
 /// JSON report of a tracking run:

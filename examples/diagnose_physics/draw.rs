@@ -383,7 +383,6 @@ pub fn magnitudes(
     truth: &BTreeMap<String, BTreeMap<String, f64>>,
     named: &BTreeMap<String, BTreeMap<String, f64>>,
 ) -> Vec<Magnitude> {
-    let th = p.theta();
     let mut out = Vec::new();
     for (effect, t) in truth {
         let est = |param: &str| {
@@ -391,8 +390,18 @@ pub fn magnitudes(
                 .iter()
                 .find_map(|c| named.get(*c).and_then(|m| m.get(param)).copied())
         };
-        let mut push = |quantity: &str, truth: f64, estimate: Option<f64>, ratio: bool| {
-            let estimate = estimate.filter(|x| x.is_finite() && x.abs() < 1e5);
+        let Some(pairs) = comparisons(effect, p, t) else {
+            out.push(Magnitude {
+                effect: effect.clone(),
+                quantity: "n/a".into(),
+                truth: None,
+                estimate: None,
+                rel_error: None,
+            });
+            continue;
+        };
+        for (quantity, truth, param, ratio) in pairs {
+            let estimate = est(param).filter(|x| x.is_finite() && x.abs() < 1e5);
             let rel_error = estimate.map(|e| {
                 if ratio {
                     ((e - 1.0) - (truth - 1.0)) / (truth - 1.0)
@@ -407,139 +416,96 @@ pub fn magnitudes(
                 estimate,
                 rel_error,
             });
-        };
-        let g = |k: &str| t.get(k).copied().unwrap_or(f64::NAN);
-        match effect.as_str() {
-            "latency" => push(
-                "latency_s vs delay_s",
-                g("latency_s"),
-                est("delay_s"),
-                false,
-            ),
-            "dead_band" => push(
-                "V r/k_P (V/K_PT) vs effort_dead",
-                g("effort_dead"),
-                est("effort_dead"),
-                false,
-            ),
-            "sensor_delay" => push(
-                "sensor_delay_s vs delay_s",
-                g("sensor_delay_s"),
-                est("delay_s"),
-                false,
-            ),
-            "rate_limit" => {
-                push(
-                    "v_accel vs v_accel_max",
-                    g("v_accel"),
-                    est("v_accel_max"),
-                    false,
-                );
-                push(
-                    "w_accel vs w_accel_max",
-                    g("w_accel"),
-                    est("w_accel_max"),
-                    false,
-                );
-            }
-            "gain_sag" | "gain_decay" => {
-                push(
-                    "−fraction/T vs rate_per_s",
-                    g("rate_per_s"),
-                    est("rate_per_s"),
-                    false,
-                );
-            }
-            "voltage_clamp" => {
-                push(
-                    "V r/k_P (V/K_PT) vs effort_max",
-                    g("effort_max"),
-                    est("effort_max"),
-                    false,
-                );
-            }
-            "amp_gain_right" => push(
-                "gain vs right_gain (−1)",
-                g("gain"),
-                est("right_gain"),
-                true,
-            ),
-            "tyre_radius_right" => {
-                push(
-                    "factor vs right_radius (−1)",
-                    g("factor"),
-                    est("right_radius"),
-                    true,
-                );
-                push("factor vs ratio (−1)", g("factor"), est("ratio"), true);
-            }
-            "dry_friction" => {
-                push(
-                    "θ4·Δv vs v_coulomb",
-                    th[3] * g("steady_loss_v"),
-                    est("v_coulomb"),
-                    false,
-                );
-                push(
-                    "θ6·Δω vs w_coulomb",
-                    th[5] * g("steady_loss_w"),
-                    est("w_coulomb"),
-                    false,
-                );
-                push(
-                    "θ4·Δv vs c_wheel",
-                    th[3] * g("steady_loss_v"),
-                    est("c_wheel"),
-                    false,
-                );
-                push(
-                    "θ4·Δv vs c_v",
-                    th[3] * g("steady_loss_v"),
-                    est("c_v"),
-                    false,
-                );
-                push(
-                    "θ6·Δω vs c_w",
-                    th[5] * g("steady_loss_w"),
-                    est("c_w"),
-                    false,
-                );
-            }
-            // The driven wheels carry the weight less the caster's share b/x_c: the floor
-            // passes at most μ g (1 − b/x_c). Accelerating moves the load F (r + 2 I_e/(m r))/x_c
-            // onto them (`PhysicalProfile::load_transfer_per_force`, borne out by the engine's
-            // contact forces).
-            "floor_mu" => {
-                push(
-                    "μ g (1 − b/x_c) vs accel_max",
-                    g("mu") * 9.81 * p.wheel_load_share(),
-                    est("accel_max"),
-                    false,
-                );
-                push(
-                    "μ (r + 2 I_e/(m r))/x_c vs load_transfer",
-                    g("mu") * p.load_transfer_per_force(),
-                    est("load_transfer"),
-                    false,
-                );
-            }
-            "payload" => {
-                push("at_s vs time_s", g("at_s"), est("time_s"), false);
-                push(
-                    "loaded θ1 vs theta1_after",
-                    g("theta1_loaded_map"),
-                    est("theta1_after"),
-                    false,
-                );
-            }
-            _ => out.push(Magnitude {
-                effect: effect.clone(),
-                quantity: "n/a".into(),
-                truth: None,
-                estimate: None,
-                rel_error: None,
-            }),
         }
     }
     out
+}
+
+/// What [`magnitudes`] compares for true `effect` (its drawn values `t` on profile `p`):
+/// (quantity, true value, the named candidate's parameter, compared as a ratio's deviation
+/// from 1), or `None` where nothing is (`n/a`).
+fn comparisons(
+    effect: &str,
+    p: &PhysicalProfile,
+    t: &BTreeMap<String, f64>,
+) -> Option<Vec<(&'static str, f64, &'static str, bool)>> {
+    let th = p.theta();
+    let g = |k: &str| t.get(k).copied().unwrap_or(f64::NAN);
+    let (loss_v, loss_w) = (th[3] * g("steady_loss_v"), th[5] * g("steady_loss_w"));
+    Some(match effect {
+        "latency" => vec![("latency_s vs delay_s", g("latency_s"), "delay_s", false)],
+        "dead_band" => vec![(
+            "V r/k_P (V/K_PT) vs effort_dead",
+            g("effort_dead"),
+            "effort_dead",
+            false,
+        )],
+        "sensor_delay" => vec![(
+            "sensor_delay_s vs delay_s",
+            g("sensor_delay_s"),
+            "delay_s",
+            false,
+        )],
+        "rate_limit" => vec![
+            ("v_accel vs v_accel_max", g("v_accel"), "v_accel_max", false),
+            ("w_accel vs w_accel_max", g("w_accel"), "w_accel_max", false),
+        ],
+        "gain_sag" | "gain_decay" => vec![(
+            "−fraction/T vs rate_per_s",
+            g("rate_per_s"),
+            "rate_per_s",
+            false,
+        )],
+        "voltage_clamp" => vec![(
+            "V r/k_P (V/K_PT) vs effort_max",
+            g("effort_max"),
+            "effort_max",
+            false,
+        )],
+        "amp_gain_right" => vec![("gain vs right_gain (−1)", g("gain"), "right_gain", true)],
+        "tyre_radius_right" => vec![
+            (
+                "factor vs right_radius (−1)",
+                g("factor"),
+                "right_radius",
+                true,
+            ),
+            ("factor vs ratio (−1)", g("factor"), "ratio", true),
+        ],
+        "dry_friction" => vec![
+            ("θ4·Δv vs v_coulomb", loss_v, "v_coulomb", false),
+            ("θ6·Δω vs w_coulomb", loss_w, "w_coulomb", false),
+            ("θ4·Δv vs c_wheel", loss_v, "c_wheel", false),
+            ("θ4·Δv vs c_v", loss_v, "c_v", false),
+            ("θ6·Δω vs c_w", loss_w, "c_w", false),
+        ],
+        // The driven wheels carry the weight less the caster's share b/x_c: the floor
+        // passes at most μ g (1 − b/x_c). Accelerating moves the load F (r + 2 I_e/(m r))/x_c
+        // onto them (`PhysicalProfile::load_transfer_per_force`, borne out by the engine's
+        // contact forces).
+        "floor_mu" => vec![
+            (
+                "μ g (1 − b/x_c) vs accel_max",
+                g("mu") * 9.81 * p.wheel_load_share(),
+                "accel_max",
+                false,
+            ),
+            (
+                "μ (r + 2 I_e/(m r))/x_c vs load_transfer",
+                g("mu") * p.load_transfer_per_force(),
+                "load_transfer",
+                false,
+            ),
+        ],
+        "payload" => vec![
+            ("at_s vs time_s", g("at_s"), "time_s", false),
+            (
+                "loaded θ1 vs theta1_after",
+                g("theta1_loaded_map"),
+                "theta1_after",
+                false,
+            ),
+        ],
+        _ => return None,
+    })
 }

@@ -493,6 +493,32 @@ fn run_into(spec: &RunSpec, cache: &CleanRuns, rec: &mut Record) -> Result<()> {
     rec.unphysical = rec.pose_speed_max > 1.5 * rec.encoder_speed_max + 0.05 * p.v_max;
     let model = wheelid::models::by_name(p.model_name())
         .with_context(|| format!("no model {}", p.model_name()))?;
+    let ds = diagnose_settings(&p, spec)?;
+    let clock = Instant::now();
+    let d = diagnose(&[recording], model.as_ref(), &ds)?;
+    rec.diagnose_s = clock.elapsed().as_secs_f64();
+    // For looking at a case: the full text report on stderr.
+    if std::env::var_os("DIAGNOSE_PHYSICS_REPORTS").is_some() {
+        eprintln!(
+            "=== {} {} {:?} seed {}\n{}",
+            spec.profile,
+            spec.timing.name(),
+            spec.effects,
+            spec.seed,
+            wheelid::report::diagnosis_text(&d)
+        );
+    }
+    read_diagnosis(rec, &d);
+    // A clean run is right only with nothing named and nothing left unexplained.
+    rec.exactly_right = exactly_right(&spec.effects, &rec.named)
+        && (!spec.effects.is_empty() || rec.unexplained.is_none());
+    rec.magnitudes = magnitudes(&p, &rec.truth_params, &rec.named_params);
+    Ok(())
+}
+
+/// The diagnosis's settings for a run: the defaults, the track the host converted ω with,
+/// and `--search-samples`, `--candidates` where given.
+fn diagnose_settings(p: &PhysicalProfile, spec: &RunSpec) -> Result<DiagnoseSettings> {
     // Default settings; the track is the d the host converted ω with (the metadata's `robot`
     // would look up the simulator's profile of the same name, whose track may differ).
     let mut ds = DiagnoseSettings {
@@ -511,20 +537,11 @@ fn run_into(spec: &RunSpec, cache: &CleanRuns, rec: &mut Record) -> Result<()> {
             })
             .collect::<Result<_>>()?;
     }
-    let clock = Instant::now();
-    let d = diagnose(&[recording], model.as_ref(), &ds)?;
-    rec.diagnose_s = clock.elapsed().as_secs_f64();
-    // For looking at a case: the full text report on stderr.
-    if std::env::var_os("DIAGNOSE_PHYSICS_REPORTS").is_some() {
-        eprintln!(
-            "=== {} {} {:?} seed {}\n{}",
-            spec.profile,
-            spec.timing.name(),
-            spec.effects,
-            spec.seed,
-            wheelid::report::diagnosis_text(&d)
-        );
-    }
+    Ok(ds)
+}
+
+/// The diagnosis `d`'s names, parameters, refusals, verdict and fits into `rec`.
+fn read_diagnosis(rec: &mut Record, d: &wheelid::diagnose::Diagnosis) {
     rec.named = d.findings.iter().map(|f| f.effect.clone()).collect();
     rec.named_params = d
         .findings
@@ -555,11 +572,6 @@ fn run_into(spec: &RunSpec, cache: &CleanRuns, rec: &mut Record) -> Result<()> {
         v: d.final_stage.channels.v.fit_percent,
         w: d.final_stage.channels.w.fit_percent,
     };
-    // A clean run is right only with nothing named and nothing left unexplained.
-    rec.exactly_right = exactly_right(&spec.effects, &rec.named)
-        && (!spec.effects.is_empty() || rec.unexplained.is_none());
-    rec.magnitudes = magnitudes(&p, &rec.truth_params, &rec.named_params);
-    Ok(())
 }
 
 /// Which cases to run.

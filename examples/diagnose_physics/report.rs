@@ -186,6 +186,21 @@ fn realised(out: &mut String, recs: &[&Record]) {
 /// The markdown report of `recs` (`wall_s`: the whole run's wall time).
 pub fn report(recs: &[Record], wall_s: f64) -> String {
     let mut out = String::new();
+    header(&mut out, recs, wall_s);
+    let ok: Vec<&Record> = recs.iter().filter(|r| r.error.is_none()).collect();
+    let singles: Vec<&Record> = ok.iter().copied().filter(|r| r.kind != "pair").collect();
+    let pairs: Vec<&Record> = ok.iter().copied().filter(|r| r.kind == "pair").collect();
+    confusion(&mut out, &singles, "single effects and clean runs");
+    confusion(&mut out, &pairs, "pairs");
+    realised(&mut out, &singles);
+    exactly_right(&mut out, recs);
+    false_alarms(&mut out, &ok);
+    magnitudes(&mut out, &ok);
+    out
+}
+
+/// The report's title, counts and times, and one line per failed run.
+fn header(out: &mut String, recs: &[Record], wall_s: f64) {
     let ok: Vec<&Record> = recs.iter().filter(|r| r.error.is_none()).collect();
     let failed = recs.len() - ok.len();
     let count = |k: &str| recs.iter().filter(|r| r.kind == k).count();
@@ -217,12 +232,10 @@ pub fn report(recs: &[Record], wall_s: f64) -> String {
             r.error.as_deref().unwrap_or("")
         );
     }
-    let singles: Vec<&Record> = ok.iter().copied().filter(|r| r.kind != "pair").collect();
-    let pairs: Vec<&Record> = ok.iter().copied().filter(|r| r.kind == "pair").collect();
-    confusion(&mut out, &singles, "single effects and clean runs");
-    confusion(&mut out, &pairs, "pairs");
-    realised(&mut out, &singles);
+}
 
+/// The share exactly right by group (with intervals), and the pairs with a masked effect.
+fn exactly_right(out: &mut String, recs: &[Record]) {
     let _ = writeln!(
         out,
         "\n### Exactly right\n\nNamed set = true set through the table TRUTH (clean: nothing \
@@ -316,7 +329,10 @@ pub fn report(recs: &[Record], wall_s: f64) -> String {
             );
         }
     }
+}
 
+/// False alarms on the clean runs among `ok`.
+fn false_alarms(out: &mut String, ok: &[&Record]) {
     let clean: Vec<&Record> = ok.iter().copied().filter(|r| r.kind == "clean").collect();
     if !clean.is_empty() {
         let n = clean.len();
@@ -338,9 +354,12 @@ pub fn report(recs: &[Record], wall_s: f64) -> String {
             pct(mismatch, n)
         );
     }
+}
 
+/// Magnitude errors per effect and quantity over `ok`.
+fn magnitudes(out: &mut String, ok: &[&Record]) {
     let mut mags: BTreeMap<(String, String), (usize, Vec<f64>)> = BTreeMap::new();
-    for r in &ok {
+    for r in ok {
         for m in &r.magnitudes {
             let e = mags
                 .entry((m.effect.clone(), m.quantity.clone()))
@@ -383,5 +402,4 @@ pub fn report(recs: &[Record], wall_s: f64) -> String {
             );
         }
     }
-    out
 }

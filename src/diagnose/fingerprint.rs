@@ -28,118 +28,155 @@ pub(super) struct Pattern {
 /// Builds the fingerprints of `c` at the current model from its [`Probe`]; `None` if the
 /// candidate cannot act on these data (no probe level binds, no track for the asymmetry).
 pub(super) fn patterns(c: Candidate, data: &Data, cur: &Current) -> Option<Vec<Pattern>> {
-    let frame = data.frame();
     let mut cands = cur.candidates.clone();
     cands.push(c);
-    let model = data.model(&cands);
-    let th6 = &cur.theta[..6];
     let (t_lo, t_hi) = data.span();
-    let null = c.effect().null(th6, 0.5 * (t_lo + t_hi));
-    let with = |vals: &[f64]| {
-        let mut th = cur.theta.clone();
-        th.extend_from_slice(vals);
-        simulate_all(&model, &th, &data.recs, &cur.initial)
+    let at = Probing {
+        c,
+        data,
+        cur,
+        model: data.model(&cands),
+        null: c.effect().null(&cur.theta[..6], 0.5 * (t_lo + t_hi)),
     };
-    let fd = |vals: &[f64], j: usize, h: f64| -> Option<nalgebra::DVector<f64>> {
-        let mut v = vals.to_vec();
-        v[j] += h;
-        let y = with(&v)?;
-        Some(frame.flatten(&score::difference(&y, &cur.sim, h)))
-    };
-    let single =
-        |cols: Vec<nalgebra::DVector<f64>>, params: Vec<usize>, evidence: String| Pattern {
-            candidate: c,
-            s: DMatrix::from_columns(&cols),
-            param_of_col: params,
-            guess: null.clone(),
-            inactive: Vec::new(),
-            evidence,
-            grid: 1,
-            probed: Vec::new(),
-        };
     match c.effect().probe(&data.probe_data(cur))? {
         Probe::Gradient(steps) => {
             let cols = steps
                 .iter()
-                .map(|&(j, h)| fd(&null, j, h))
+                .map(|&(j, h)| at.difference(&at.null, j, h))
                 .collect::<Option<Vec<_>>>()?;
             let params = steps.iter().map(|&(j, _)| j).collect();
-            Some(vec![single(cols, params, c.effect().evidence().into())])
+            Some(vec![at.single(cols, params, c.effect().evidence().into())])
         }
-        // The level read off a nominal fit that has absorbed part of the limit sits above the
-        // true one: probed at a few fractions of it, the best taken (Bonferroni).
-        // The fractions' simulations on the pool's threads (a traction probe's is the longest
-        // of a round), collected in order.
-        Probe::Levels { levels, evidence } => {
-            use rayon::prelude::*;
-            let params: Vec<usize> = levels.iter().map(|&(j, _)| j).collect();
-            let at = |f: f64| -> Option<Pattern> {
-                let mut v = null.clone();
-                for &(j, level) in &levels {
-                    v[j] = f * level;
-                }
-                // One level probed alone: its column's simulation is the guess's own.
-                let mut probed = Vec::new();
-                let cols = params
-                    .iter()
-                    .map(|&j| {
-                        let mut one = null.clone();
-                        one[j] = v[j];
-                        let y = with(&one)?;
-                        if params.len() == 1 {
-                            probed.push((one, frame.residuals(&y).norm_squared()));
-                        }
-                        Some(frame.flatten(&score::difference(&y, &cur.sim, 1.0)))
-                    })
-                    .collect::<Option<Vec<_>>>()?;
-                let mut p = single(cols, params.clone(), evidence.clone());
-                p.guess = v;
-                p.grid = PROBE_FRACTIONS.len();
-                p.probed = probed;
-                Some(p)
-            };
-            let mut all = PROBE_FRACTIONS
-                .par_iter()
-                .map(|&f| at(f))
-                .collect::<Option<Vec<_>>>()?;
-            // Each fraction's pattern carries every fraction's simulated cost.
-            let probed: Vec<(Vec<f64>, f64)> =
-                all.iter().flat_map(|p| p.probed.iter().cloned()).collect();
-            all.iter_mut().for_each(|p| p.probed.clone_from(&probed));
-            Some(all)
+        Probe::Levels { levels, evidence } => at.levels(&levels, &evidence),
+        Probe::TimeGrid { time, n, columns } => at.time_grid(time, n, &columns),
+    }
+}
+
+/// Candidate `c` probed at the model in hand `cur`: the model extended by it and its null
+/// values ([`patterns`]).
+struct Probing<'a> {
+    c: Candidate,
+    data: &'a Data,
+    cur: &'a Current,
+    model: Extended,
+    null: Vec<f64>,
+}
+
+impl Probing<'_> {
+    /// The simulation of every recording with the candidate's values `vals`.
+    fn with(&self, vals: &[f64]) -> Option<Outputs> {
+        let mut th = self.cur.theta.clone();
+        th.extend_from_slice(vals);
+        simulate_all(&self.model, &th, &self.data.recs, &self.cur.initial)
+    }
+
+    /// The flattened pattern of a step `h` of parameter `j` from `vals`: (ŷ − ŷ_now)/h.
+    fn difference(&self, vals: &[f64], j: usize, h: f64) -> Option<nalgebra::DVector<f64>> {
+        let mut v = vals.to_vec();
+        v[j] += h;
+        let y = self.with(&v)?;
+        Some(
+            self.data
+                .frame()
+                .flatten(&score::difference(&y, &self.cur.sim, h)),
+        )
+    }
+
+    /// A pattern of columns `cols` (parameters `params`) guessed at the null.
+    fn single(
+        &self,
+        cols: Vec<nalgebra::DVector<f64>>,
+        params: Vec<usize>,
+        evidence: String,
+    ) -> Pattern {
+        Pattern {
+            candidate: self.c,
+            s: DMatrix::from_columns(&cols),
+            param_of_col: params,
+            guess: self.null.clone(),
+            inactive: Vec::new(),
+            evidence,
+            grid: 1,
+            probed: Vec::new(),
         }
-        // A grid of change times over the middle of the run.
-        Probe::TimeGrid { time, n, columns } => {
-            let pattern_at = |g: usize| {
-                let ts = t_lo + (t_hi - t_lo) * g as f64 / (n + 1) as f64;
-                let mut vals = null.clone();
-                vals[time] = ts;
-                let cols = columns
-                    .iter()
-                    .map(|&(j, rel)| fd(&vals, j, rel * vals[j].abs().max(1e-3)))
-                    .collect::<Option<Vec<_>>>()?;
-                let params = columns.iter().map(|&(j, _)| j).collect();
-                let mut p = single(
-                    cols,
-                    params,
-                    format!("the dynamics change around t = {ts:.1} s"),
-                );
-                p.guess = vals;
-                p.grid = n;
-                Some(p)
-            };
-            // On the pool's threads; a time whose simulation panics is no pattern (as before on
-            // a thread of its own).
-            use rayon::prelude::*;
-            (1..=n)
-                .into_par_iter()
-                .map(|g| {
-                    std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| pattern_at(g)))
-                        .ok()
-                        .flatten()
+    }
+
+    /// The level read off a nominal fit that has absorbed part of the limit sits above the
+    /// true one: probed at a few fractions of it ([`PROBE_FRACTIONS`]), the best taken
+    /// (Bonferroni). The fractions' simulations on the pool's threads (a traction probe's is
+    /// the longest of a round), collected in order.
+    fn levels(&self, levels: &[(usize, f64)], evidence: &str) -> Option<Vec<Pattern>> {
+        use rayon::prelude::*;
+        let frame = self.data.frame();
+        let params: Vec<usize> = levels.iter().map(|&(j, _)| j).collect();
+        let at = |f: f64| -> Option<Pattern> {
+            let mut v = self.null.clone();
+            for &(j, level) in levels {
+                v[j] = f * level;
+            }
+            // One level probed alone: its column's simulation is the guess's own.
+            let mut probed = Vec::new();
+            let cols = params
+                .iter()
+                .map(|&j| {
+                    let mut one = self.null.clone();
+                    one[j] = v[j];
+                    let y = self.with(&one)?;
+                    if params.len() == 1 {
+                        probed.push((one, frame.residuals(&y).norm_squared()));
+                    }
+                    Some(frame.flatten(&score::difference(&y, &self.cur.sim, 1.0)))
                 })
-                .collect::<Option<Vec<_>>>()
-        }
+                .collect::<Option<Vec<_>>>()?;
+            let mut p = self.single(cols, params.clone(), evidence.into());
+            p.guess = v;
+            p.grid = PROBE_FRACTIONS.len();
+            p.probed = probed;
+            Some(p)
+        };
+        let mut all = PROBE_FRACTIONS
+            .par_iter()
+            .map(|&f| at(f))
+            .collect::<Option<Vec<_>>>()?;
+        // Each fraction's pattern carries every fraction's simulated cost.
+        let probed: Vec<(Vec<f64>, f64)> =
+            all.iter().flat_map(|p| p.probed.iter().cloned()).collect();
+        all.iter_mut().for_each(|p| p.probed.clone_from(&probed));
+        Some(all)
+    }
+
+    /// A grid of `n` change times (parameter `time`) over the middle of the run, `columns`
+    /// (parameter, relative step) differenced at each; on the pool's threads, a time whose
+    /// simulation panics is no pattern.
+    fn time_grid(&self, time: usize, n: usize, columns: &[(usize, f64)]) -> Option<Vec<Pattern>> {
+        use rayon::prelude::*;
+        let (t_lo, t_hi) = self.data.span();
+        let pattern_at = |g: usize| {
+            let ts = t_lo + (t_hi - t_lo) * g as f64 / (n + 1) as f64;
+            let mut vals = self.null.clone();
+            vals[time] = ts;
+            let cols = columns
+                .iter()
+                .map(|&(j, rel)| self.difference(&vals, j, rel * vals[j].abs().max(1e-3)))
+                .collect::<Option<Vec<_>>>()?;
+            let params = columns.iter().map(|&(j, _)| j).collect();
+            let mut p = self.single(
+                cols,
+                params,
+                format!("the dynamics change around t = {ts:.1} s"),
+            );
+            p.guess = vals;
+            p.grid = n;
+            Some(p)
+        };
+        (1..=n)
+            .into_par_iter()
+            .map(|g| {
+                std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| pattern_at(g)))
+                    .ok()
+                    .flatten()
+            })
+            .collect::<Option<Vec<_>>>()
     }
 }
 

@@ -25,20 +25,12 @@ pub(super) fn start_candidate(
     cands.push(c);
     let model = data.model(&cands);
     let base = cur.theta.len();
-    let mut guess = nominee.pattern.guess.clone();
     let (t_lo, t_hi) = data.span();
     let margin = 0.05 * (t_hi - t_lo);
     let mut bounds = model_bounds(&cur.candidates, (t_lo + margin, t_hi - margin));
     let cb = c.effect().bounds((t_lo + margin, t_hi - margin));
     let search = c.effect().search();
-    for (g, &(lo, hi)) in guess.iter_mut().zip(&cb) {
-        let span = if hi.is_finite() && lo.is_finite() {
-            1e-3 * (hi - lo)
-        } else {
-            1e-6
-        };
-        *g = g.clamp(lo + span, hi - span);
-    }
+    let guess = inside(&nominee.pattern.guess, &cb);
     // A friction or a loss that the residual asks to be negative is no such physics.
     if c.effect().channels() == (EffectChannels::Each { positive: true })
         && nominee.pattern.inactive.len() == 2
@@ -75,20 +67,7 @@ pub(super) fn start_candidate(
     // least cost kept: the start's, unless θ moves after it).
     let mut screened = None;
     if search.is_limit() {
-        // The probed levels only (a limit may have a parameter that is no level, as a mix).
-        let active: Vec<usize> = (nominee.pattern.param_of_col.iter().copied())
-            .filter(|j| !nominee.pattern.inactive.contains(j))
-            .collect();
-        // The probe simulated its fractions of the level: a scale whose θ is one of them to
-        // the bit has its cost already.
-        let probed = |th: &[f64]| {
-            let (held, own) = th.split_at(base.min(th.len()));
-            let same = |(vals, _): &&(Vec<f64>, f64)| same_bits(own, vals);
-            same_bits(held, &cur.theta)
-                .then(|| nominee.pattern.probed.iter().find(same).map(|&(_, c)| c))
-                .flatten()
-        };
-        let (scaled, cost) = level_grid(&theta, base, &active, &training_cost, &probed);
+        let (scaled, cost) = scaled_limit(&theta, cur, nominee, &training_cost);
         theta = scaled;
         screened = Some((theta.clone(), cost));
     }
@@ -123,6 +102,47 @@ pub(super) fn start_candidate(
         pinned,
         cost,
     })
+}
+
+/// `guess` moved inside the candidate's bounds `cb` by a thousandth of their span (10⁻⁶ where
+/// a bound is infinite).
+fn inside(guess: &[f64], cb: &[(f64, f64)]) -> Vec<f64> {
+    guess
+        .iter()
+        .zip(cb)
+        .map(|(g, &(lo, hi))| {
+            let span = if hi.is_finite() && lo.is_finite() {
+                1e-3 * (hi - lo)
+            } else {
+                1e-6
+            };
+            g.clamp(lo + span, hi - span)
+        })
+        .collect()
+}
+
+/// A limit's start `theta` (the model in hand's parameters, then the nominee's) scaled on
+/// [`level_grid`] over its probed levels (a limit may have a parameter that is no level, as
+/// a mix); the probe simulated its fractions of the level, so a scale whose θ is one of them
+/// to the bit has its cost already. Returns the scaled θ and its training cost.
+fn scaled_limit(
+    theta: &[f64],
+    cur: &Current,
+    nominee: &Nominee,
+    training_cost: &(dyn Fn(&[f64]) -> f64 + Sync),
+) -> (Vec<f64>, f64) {
+    let base = cur.theta.len();
+    let active: Vec<usize> = (nominee.pattern.param_of_col.iter().copied())
+        .filter(|j| !nominee.pattern.inactive.contains(j))
+        .collect();
+    let probed = |th: &[f64]| {
+        let (held, own) = th.split_at(base.min(th.len()));
+        let same = |(vals, _): &&(Vec<f64>, f64)| same_bits(own, vals);
+        same_bits(held, &cur.theta)
+            .then(|| nominee.pattern.probed.iter().find(same).map(|&(_, c)| c))
+            .flatten()
+    };
+    level_grid(theta, base, &active, training_cost, &probed)
 }
 
 /// Why a limit `c` whose screened start (its parameters `levels`, those `held` left out) binds
