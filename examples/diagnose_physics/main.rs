@@ -705,6 +705,11 @@ pub struct Args {
     /// Only these physics effects in the single and pair cases (default: all of TRUTH).
     #[arg(long)]
     pub effects: Option<String>,
+    /// Only the single and pair cases that hold at least one of these physics effects
+    /// (comma-separated; clean runs are kept): an A/B of a change that acts only where they
+    /// do, with every case keeping its name and its draws.
+    #[arg(long, value_delimiter = ',')]
+    pub involving: Option<Vec<String>>,
     /// Duration \[s\] for every profile (default: 60 for khepera3, 120 otherwise).
     #[arg(long)]
     pub duration: Option<f64>,
@@ -759,6 +764,19 @@ pub fn plan(a: &Args) -> Result<Vec<RunSpec>> {
             })
             .collect::<Result<_>>()?,
     };
+    if let Some(e) = a
+        .involving
+        .iter()
+        .flatten()
+        .find(|e| !all.contains(&e.as_str()))
+    {
+        bail!("--involving {e}: known are {}", all.join(", "));
+    }
+    let involved = |set: &[&str]| {
+        a.involving
+            .as_ref()
+            .is_none_or(|want| set.is_empty() || set.iter().any(|e| want.iter().any(|w| w == e)))
+    };
     let mut specs = Vec::new();
     for profile in a.profiles.split(',').map(str::trim) {
         if PhysicalProfile::by_name(profile).is_none() {
@@ -772,6 +790,9 @@ pub fn plan(a: &Args) -> Result<Vec<RunSpec>> {
                 format!("--conventions {conv}: expected instant, window_end or window_middle")
             })?;
             for set in effect_sets(cases, &effects) {
+                if !involved(&set) {
+                    continue;
+                }
                 for &seed in &seeds {
                     specs.push(RunSpec {
                         profile: profile.to_string(),
