@@ -34,7 +34,9 @@ pub use output_delay::{LAG_Z, MAX_LAG_S, OutputDelay, heading_lag};
 pub use payload_change::PayloadChange;
 pub use slip::Slip;
 pub use traction_limit::TractionLimit;
-pub use tyre_asymmetry::{FAR_SHARE, HEADING_SHARE, MEASURED_Z, TyreAsymmetry, heading_ratio};
+pub use tyre_asymmetry::{
+    CALM_SHARE, FAR_SHARE, HEADING_SHARE, MEASURED_Z, SLIP_Z, TyreAsymmetry, heading_ratio,
+};
 pub use velocity_saturation::VelocitySaturation;
 pub use vw_friction::VwFriction;
 pub use wheel_asymmetry::WheelAsymmetry;
