@@ -762,6 +762,25 @@ fn a_larger_tyre_on_a_slippery_floor_is_named_without_an_amplifier() {
     assert_tyre_named_with(&rec, model.as_ref(), "traction_limit", tyre, 0.05);
 }
 
+/// A slippery floor alone on the Pioneer-like robot (μ = 0.0494, slipping on 45 % of the rows;
+/// hold-out seed 1101's draw, looked at after its report). Its wheels spin up ahead of the
+/// body, so over all chunks the chassis heading turned as a right/left tyre ratio of about
+/// 0.94: a smaller right tyre was measured and named, with an amplifier beside it that
+/// cancelled it in the dynamics. The calmest third of the chunks turns as equal tyres; now the
+/// floor is named alone.
+#[test]
+fn a_slippery_floor_is_not_named_a_smaller_tyre_by_its_slipping_wheels() {
+    let (rec, model) = pioneer_recording(1101, |s| {
+        s.effects.floor_mu = Some(0.049_417_845_357_963_605);
+    });
+    let d = PhysicalProfile::pioneer3dx().d;
+    let (rho, _) =
+        wheelid::models::effects::heading_ratio(std::slice::from_ref(&rec), d).expect("a heading");
+    assert!((rho - 1.0).abs() < 0.01, "heading ratio {rho}");
+    let (d, _) = diagnosed_named(&rec, model.as_ref());
+    assert!(named_param(&d, "traction_limit", "accel_max").is_some());
+}
+
 /// A voltage clamp beside a larger right tyre (1.0342) on the Pioneer-like robot (hold-out
 /// seed 1047's pair, looked at after its report). The supply clamps the voltage before the
 /// tyre's lever acts, so the clamped wheel pushes the chassis 1/ρ as hard; the tyre's 1/ρ was
