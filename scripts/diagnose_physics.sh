@@ -135,7 +135,10 @@
 # single, clean) and clean 5971-6070 at 9f2f5bf's method; run once at that method (binary of
 # 89d97bf's tree, 2026-12-07: pairs 505/528, single+clean 311/312, clean 0/600), then 1101's
 # Pioneer-like slippery floor was looked at (the heading's ratio from its calm chunks where
-# the wheels slip, 4838f5d; A/B on the cached 1101-1104's runs involving the floor or a tyre).
+# the wheels slip, 4838f5d; A/B on the cached 1101-1104's runs involving the floor or a tyre:
+# pairs 155 -> 161/168, singles+clean 71 -> 72/72, none right -> wrong); the next report,
+# declared before it runs, is 1105-1108 (pairs window_end; single, clean) and clean 6071-6170
+# at 4838f5d's method.
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
