@@ -373,3 +373,32 @@ fn a_sensor_delay_beside_a_clamp_is_measured_when_the_clamp_loses_rank_twice() {
     let truth = r.truth_params["sensor_delay"]["sensor_delay_s"];
     assert!((delay - truth).abs() <= 0.05 * truth, "{delay} vs {truth}");
 }
+
+/// `--involving` keeps the clean run and only the single and pair cases that hold one of its
+/// effects, each under its own name: of the twelve effects' 1 + 12 + 66 cases, 1 clean, the
+/// floor and the tyre alone, and the 11 + 11 − 1 pairs with either; an unknown effect is an
+/// error naming it.
+#[test]
+fn involving_keeps_the_cases_that_hold_its_effects() {
+    use clap::Parser as _;
+    let args = |extra: &[&str]| {
+        let mut v = vec!["harness", "--seeds", "7", "--profiles", "khepera3"];
+        v.extend_from_slice(&["--conventions", "window_end", "--cases", "all"]);
+        v.extend_from_slice(extra);
+        harness::Args::try_parse_from(v).expect("parses")
+    };
+    let all = harness::plan(&args(&[])).expect("plans");
+    assert_eq!(all.len(), 1 + 12 + 66);
+    let some = harness::plan(&args(&["--involving", "floor_mu,tyre_radius_right"])).expect("plans");
+    assert_eq!(some.len(), 1 + 2 + 21);
+    let holds = |s: &RunSpec| {
+        s.effects.is_empty()
+            || s.effects
+                .iter()
+                .any(|e| ["floor_mu", "tyre_radius_right"].contains(e))
+    };
+    assert!(some.iter().all(holds));
+    assert_eq!(all.iter().filter(|s| holds(s)).count(), some.len());
+    let err = harness::plan(&args(&["--involving", "ice"])).expect_err("unknown");
+    assert!(format!("{err}").contains("--involving ice"), "{err}");
+}
