@@ -105,20 +105,18 @@ pub(super) fn start_candidate(
 }
 
 /// `guess` moved inside the candidate's bounds `cb` by a thousandth of their span (10⁻⁶ where
-/// a bound is infinite).
+/// a bound is infinite); a value without a bound is kept as it is.
 fn inside(guess: &[f64], cb: &[(f64, f64)]) -> Vec<f64> {
-    guess
-        .iter()
-        .zip(cb)
-        .map(|(g, &(lo, hi))| {
-            let span = if hi.is_finite() && lo.is_finite() {
-                1e-3 * (hi - lo)
-            } else {
-                1e-6
-            };
-            g.clamp(lo + span, hi - span)
-        })
-        .collect()
+    let mut out = guess.to_vec();
+    for (g, &(lo, hi)) in out.iter_mut().zip(cb) {
+        let span = if hi.is_finite() && lo.is_finite() {
+            1e-3 * (hi - lo)
+        } else {
+            1e-6
+        };
+        *g = g.clamp(lo + span, hi - span);
+    }
+    out
 }
 
 /// A limit's start `theta` (the model in hand's parameters, then the nominee's) scaled on
