@@ -138,7 +138,9 @@
 # the wheels slip, 4838f5d; A/B on the cached 1101-1104's runs involving the floor or a tyre:
 # pairs 155 -> 161/168, singles+clean 71 -> 72/72, none right -> wrong); the next report,
 # declared before it runs, is 1105-1108 (pairs window_end; single, clean) and clean 6071-6170
-# at 4838f5d's method.
+# at 4838f5d's method; 1105-1106's pairs run once with a binary of e168911's tree (256/264,
+# read; 2026-12-07), their singles cut off by the session's end (unread): the rest of the
+# report still to run at the same method.
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
