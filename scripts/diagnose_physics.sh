@@ -139,8 +139,9 @@
 # pairs 155 -> 161/168, singles+clean 71 -> 72/72, none right -> wrong); the next report,
 # declared before it runs, is 1105-1108 (pairs window_end; single, clean) and clean 6071-6170
 # at 4838f5d's method; 1105-1106's pairs run once with a binary of e168911's tree (256/264,
-# read; 2026-12-07), their singles cut off by the session's end (unread): the rest of the
-# report still to run at the same method.
+# read; 2026-12-07), their singles cut off by the session's end (unread) and run again whole
+# with the same binary, then 1107-1108 (pairs window_end; single, clean) and clean 6071-6170
+# with it (2026-12-07: pairs 509/528 pooled, single+clean 312/312, clean 0/600).
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
