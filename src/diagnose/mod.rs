@@ -63,7 +63,8 @@
 //!    validation sample against a change where it happened (one parameter read off them),
 //!    while the final fits are still reported outside the interval. Then the search starts again from the extended
 //!    model (forward selection, at most [`DiagnoseSettings::max_effects`], until every channel
-//!    is fitted to [`SEARCH_FIT_PERCENT`]; effects that move one quantity the encoders see,
+//!    is fitted to [`SEARCH_FIT_PERCENT`]; after each round a backward step removes every
+//!    earlier effect made redundant, `search::backward_step`; effects that move one quantity the encoders see,
 //!    [`wheelid_core::Effect::quantity`], are alternatives: once one is in, the others are
 //!    not searched). Forward selection is greedy: where its final model leaves a channel above
 //!    the noise floor, the search from the first round's runner-up (the best candidate that
@@ -177,7 +178,8 @@ pub struct DiagnoseSettings {
     /// (15–30 % of it for a candidate nominated at p < 10⁻¹², `accept::required_drop`, unless
     /// it is searched beside a measured effect of its quantity).
     pub min_improvement: f64,
-    /// Most effects added.
+    /// Most effects added: rounds of the forward selection, a round whose effect a later
+    /// backward step removed not counted (at most 2 × this many rounds in all).
     pub max_effects: usize,
     /// The candidate library searched.
     pub candidates: Vec<Candidate>,

@@ -114,7 +114,7 @@ fn redundant_beside_measured(
     for (c, _) in &data.measured {
         if cur.candidates.contains(c) {
             let mut tried = Vec::new();
-            cur = backward_step(data, cur, *c, settings.min_improvement, out, &mut tried);
+            cur = backward_step(data, cur, *c, settings.min_improvement, out, &mut tried).0;
         }
     }
     cur
