@@ -141,7 +141,12 @@
 # at 4838f5d's method; 1105-1106's pairs run once with a binary of e168911's tree (256/264,
 # read; 2026-12-07), their singles cut off by the session's end (unread) and run again whole
 # with the same binary, then 1107-1108 (pairs window_end; single, clean) and clean 6071-6170
-# with it (2026-12-07: pairs 509/528 pooled, single+clean 312/312, clean 0/600).
+# with it (2026-12-07: pairs 509/528 pooled, single+clean 312/312, clean 0/600). Then
+# 1107's Pioneer-like rate limit + battery was looked at (a backward step removes every
+# effect made redundant, a round whose effect was removed not counted, 42f4e5f; on the
+# cached 1105-1108: pairs 509 -> 512/528, singles+clean identical); the next report,
+# declared before it runs, is 1109-1112 (pairs window_end; single, clean) and clean
+# 6171-6270 at 42f4e5f's method.
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
