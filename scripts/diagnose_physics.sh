@@ -146,7 +146,9 @@
 # effect made redundant, a round whose effect was removed not counted, 42f4e5f; on the
 # cached 1105-1108: pairs 509 -> 512/528, singles+clean identical); the next report,
 # declared before it runs, is 1109-1112 (pairs window_end; single, clean) and clean
-# 6171-6270 at 42f4e5f's method.
+# 6171-6270 at 42f4e5f's method; run once, 2026-12-07, with one binary of its diagnosis
+# code: pairs 512/528 (1109-1110 255/264, 1111-1112 257/264), single+clean 312/312, clean
+# 0/600.
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
