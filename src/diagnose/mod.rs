@@ -64,7 +64,7 @@
 //!    while the final fits are still reported outside the interval. Then the search starts again from the extended
 //!    model (forward selection, at most [`DiagnoseSettings::max_effects`], until every channel
 //!    is fitted to [`SEARCH_FIT_PERCENT`]; after each round a backward step removes every
-//!    earlier effect made redundant, `search::backward_step`; effects that move one quantity the encoders see,
+//!    earlier effect made redundant, `backward::backward_step`; effects that move one quantity the encoders see,
 //!    [`wheelid_core::Effect::quantity`], are alternatives: once one is in, the others are
 //!    not searched). Forward selection is greedy: where its final model leaves a channel above
 //!    the noise floor, the search from the first round's runner-up (the best candidate that
@@ -100,6 +100,7 @@
 
 mod accept;
 mod assemble;
+mod backward;
 mod budget;
 mod excerpt;
 mod fingerprint;

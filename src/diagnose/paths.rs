@@ -12,7 +12,8 @@
 //! AIC_o − AIC_g = n_eff ln(J_o / J_g) + 2 (k_o − k_g)  < 0   and   names(o) ≠ names(g)
 //! ```
 
-use super::search::{Accepted, Outcome, above_floor, backward_step, rounds};
+use super::backward::backward_step;
+use super::search::{Accepted, Outcome, above_floor, rounds};
 use super::*;
 
 /// A first round's runner-up ([`Outcome::runner_up`]): its information score, its fit, and
