@@ -193,6 +193,32 @@ impl ModelFile {
         }
     }
 
+    /// The file content of a saved model refitted on recordings
+    /// ([`crate::diagnose::refit_saved`]) of the `model` parameterization: θ1…θ6 and the
+    /// effects as refitted, with their validation fits (R² 0, as [`Self::from_diagnosis`]).
+    pub fn from_saved_refit(r: &crate::diagnose::SavedRefit, model: &str) -> Self {
+        let stage = &r.refitted;
+        let quality = |c: &crate::diagnose::ChannelFit| ChannelQuality {
+            r2: 0.0,
+            fit_percent: c.fit_percent,
+        };
+        Self {
+            model: model.to_owned(),
+            robot: None,
+            estimator: Some("oe".into()),
+            theta: stage.theta[..6].to_vec(),
+            std_err: stage.std_err[..6].to_vec(),
+            cutoff_hz: 0.0,
+            samples: r.samples,
+            channels: BTreeMap::from([
+                ("v".to_owned(), quality(&stage.channels.v)),
+                ("w".to_owned(), quality(&stage.channels.w)),
+            ]),
+            effects: r.effects.clone(),
+            effects_std_err: r.effects_std_err.clone(),
+        }
+    }
+
     /// Writes the file atomically.
     ///
     /// # Errors

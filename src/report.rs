@@ -677,6 +677,53 @@ fn diagnosis_model_and_show(s: &mut String, d: &Diagnosis) {
     let _ = writeln!(s, "   ({:.2} s)", d.seconds);
 }
 
+/// The text report of a saved model refitted on recordings
+/// ([`crate::diagnose::refit_saved`]): the split, θ and every effect's parameters with their
+/// standard errors ("held" where the data cannot separate one), and the validation fits of
+/// the nominal and the refitted model with each channel's residual over its noise floor.
+pub fn saved_refit_text(r: &crate::diagnose::SavedRefit) -> String {
+    use std::fmt::Write;
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "Refit of the saved model ({}) by output error on {:.0} s; {:.0} s in the validation \
+         blocks held out (blocks 2, 4, … of {} per recording).",
+        r.refitted.model, r.split.training_s, r.split.validation_s, r.split.blocks
+    );
+    let theta: Vec<String> = (r.refitted.names.iter().zip(&r.refitted.theta))
+        .zip(&r.refitted.std_err)
+        .take(6)
+        .map(|((n, x), e)| format!("{n} {}", held_or_estimate(*x, *e, "±")))
+        .collect();
+    let _ = writeln!(s, "   θ = {}", theta.join(", "));
+    for (effect, params) in &r.effects {
+        let shown: Vec<String> = params
+            .iter()
+            .map(|(k, v)| {
+                let e = r.effects_std_err[effect].get(k).copied().unwrap_or(0.0);
+                format!("{k} = {}", held_or_estimate(*v, e, " ± "))
+            })
+            .collect();
+        let _ = writeln!(s, "   {effect}: {}", shown.join(", "));
+    }
+    let floor = |c: &crate::diagnose::Channels| {
+        format!(
+            "residual v {:.1}, ω {:.1} × the noise floor",
+            c.v.noise_ratio, c.w.noise_ratio
+        )
+    };
+    let _ = writeln!(
+        s,
+        "Validation fit: nominal {} ({}) → refitted {} ({}).",
+        fits(&r.nominal.channels),
+        floor(&r.nominal.channels),
+        fits(&r.refitted.channels),
+        floor(&r.refitted.channels)
+    );
+    let _ = writeln!(s, "   ({:.2} s)", r.seconds);
+    s
+}
+
 /// `x ± e` with at least 4 decimals and enough for the standard error's two leading digits
 /// (a fit on nearly noiseless data has errors of 10⁻⁷: printed so, never as `± 0.0000`).
 fn estimate(x: f64, e: f64, sep: &str) -> String {

@@ -50,7 +50,7 @@ pub(crate) struct DiagnoseArgs {
     #[arg(long)]
     plot: Option<PathBuf>,
     /// Write the final (extended) model as TOML: θ and `[effects.*]` with their parameters
-    /// (readable by `track --model` and `simulate --model`).
+    /// (readable by `track --model`, `simulate --model` and `identify --model`, which refits it).
     #[arg(long)]
     out: Option<PathBuf>,
     /// Print the report as JSON.

@@ -18,7 +18,9 @@ pub(crate) struct IdentifyArgs {
     /// Recordings: CSV (RECORDING_FORMAT.md) or ROS 2 bags (`.mcap`, a rosbag2 folder; by
     /// extension, else by content); several files are one multi-experiment identification.
     files: Vec<PathBuf>,
-    /// Model parameterization: vw-pd, wheel-pd, or a model a `--plugin` registers.
+    /// Model parameterization: vw-pd, wheel-pd, or a model a `--plugin` registers; or a saved
+    /// model (`….toml`, from `diagnose --out` or `identify --out`), whose θ and effects are
+    /// refitted on the recordings from their saved values.
     #[arg(long, default_value = "vw-pd")]
     model: String,
     /// Plugin library to load first (repeatable): a path, or a bare name looked up beside
@@ -61,6 +63,9 @@ pub(crate) struct IdentifyArgs {
 }
 
 pub(crate) fn run_identify(a: IdentifyArgs) -> Result<()> {
+    if Path::new(&a.model).extension().is_some_and(|e| e == "toml") {
+        return run_refit_saved(&a);
+    }
     let registry = Registry::load(Path::new(""), &a.plugin)?;
     let model = registry.model(&a.model)?;
     registry.check_estimator(&a.estimator)?;
@@ -128,6 +133,76 @@ pub(crate) fn run_identify(a: IdentifyArgs) -> Result<()> {
     }
     if let Some(dir) = &a.plot {
         list_plots(&wheelid::plot::write_plots(&id, dir)?, a.json);
+    }
+    Ok(())
+}
+
+/// `identify --model model.toml FILES`: the saved model's θ and effects refitted on the
+/// recordings (`wheelid::diagnose::refit_saved`), the nominal model beside it.
+fn run_refit_saved(a: &IdentifyArgs) -> Result<()> {
+    let path = Path::new(&a.model);
+    if a.files.is_empty() {
+        bail!(
+            "--model {}: a saved model is refitted on recordings; give them (FILES)",
+            path.display()
+        );
+    }
+    let refused = [
+        (a.compare, "--compare"),
+        (a.estimator != "oe", "--estimator"),
+        (a.solver != "ols", "--solver"),
+        (a.bounds.is_some(), "--bounds"),
+        (a.cutoff.is_some(), "--cutoff"),
+        (a.plot.is_some(), "--plot"),
+    ];
+    if let Some((_, flag)) = refused.iter().find(|(given, _)| *given) {
+        bail!(
+            "{flag} does not apply to a saved model (--model {}): it is refitted by output \
+             error, each effect within its own bounds",
+            path.display()
+        );
+    }
+    let file = ModelFile::read(path)?;
+    let theta: [f64; 6] = file.theta.as_slice().try_into().with_context(|| {
+        format!(
+            "{}: theta has {} values, not 6",
+            path.display(),
+            file.theta.len()
+        )
+    })?;
+    let model = Registry::load(Path::new(""), &a.plugin)?.model(&file.model)?;
+    let recordings = a
+        .files
+        .iter()
+        .map(|f| wheelid::files::read_recording(f, Columns::Required))
+        .collect::<Result<Vec<_>, _>>()?;
+    let mut settings = wheelid::diagnose::DiagnoseSettings::default();
+    // The recordings' track, else the saved robot's (a per-wheel effect needs one).
+    if !(recordings.iter()).any(|r| r.meta("track").is_some() || r.meta("kinematics").is_some()) {
+        settings.track_m = (file.robot.as_deref())
+            .and_then(RobotProfile::by_name)
+            .map(|p| p.track);
+    }
+    let r = wheelid::diagnose::refit_saved(
+        &recordings,
+        model.as_ref(),
+        &theta,
+        &file.effects,
+        &settings,
+    )
+    .with_context(|| format!("{}", path.display()))?;
+    if a.json {
+        out!("{}", serde_json::to_string_pretty(&r)?);
+    } else {
+        out_raw!("{}", report::saved_refit_text(&r));
+    }
+    if let Some(out) = &a.out {
+        ModelFile::from_saved_refit(&r, &file.model)
+            .on_robot_of(&recordings, file.robot.as_deref())
+            .write(out)?;
+        if !a.json {
+            out!("refitted model written to {}", out.display());
+        }
     }
     Ok(())
 }

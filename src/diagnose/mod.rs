@@ -110,6 +110,7 @@ mod measured;
 mod paths;
 mod place;
 mod prepare;
+mod saved;
 mod score;
 mod screen;
 mod search;
@@ -142,6 +143,7 @@ use wheelid_models::{Candidate, Extended};
 use wheelid_solvers::{Ols, OutputError, OutputErrorFit};
 
 pub use locate::{Band, ChannelLocation, Location, Share};
+pub use saved::{SavedRefit, refit_saved};
 use score::{Frame, Outputs, simulate_all};
 
 use crate::identify::{IdentifySettings, identify};
@@ -505,26 +507,9 @@ pub fn diagnose_observed(
     let progress = Progress::new(observer, 4);
     progress.step("fitting the nominal model", 0);
     let (data, nominal_fit) = prepare(recordings, model, settings)?;
-    let nominal_model = data.model(&[]);
-    let sim = simulate_all(
-        &nominal_model,
-        &nominal_fit.theta,
-        &data.recs,
-        &nominal_fit.initial,
-    )
-    .ok_or_else(|| DiagnoseError::Setting("the nominal model does not simulate".into()))?;
+    let cur = nominal_current(&data, &nominal_fit)?;
     // The report compares the final model with this simulation (simulated once).
-    let nominal_sim = sim.clone();
-    let cur = Current {
-        candidates: Vec::new(),
-        pinned: Vec::new(),
-        theta: nominal_fit.theta.clone(),
-        std_err: nominal_fit.std_err.clone(),
-        covariance: nominal_fit.covariance.clone(),
-        initial: nominal_fit.initial.clone(),
-        sim,
-        jacobian: nominal_fit.jacobian.as_ref().map(|j| data.frame().weigh(j)),
-    };
+    let nominal_sim = cur.sim.clone();
     let nominal = data.stage(&cur, &data.valid);
     progress.step("testing the residuals", 1);
     let max_lag = data.max_lag(settings);

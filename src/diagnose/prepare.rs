@@ -492,3 +492,22 @@ pub(super) fn prepare(
     };
     Ok((data, fit))
 }
+
+/// The nominal model in hand: the nominal `fit` on `data`, simulated over every recording.
+///
+/// # Errors
+/// [`DiagnoseError::Setting`] where the fitted θ does not simulate.
+pub(super) fn nominal_current(data: &Data, fit: &OutputErrorFit) -> Result<Current, DiagnoseError> {
+    let sim = simulate_all(&data.model(&[]), &fit.theta, &data.recs, &fit.initial)
+        .ok_or_else(|| DiagnoseError::Setting("the nominal model does not simulate".into()))?;
+    Ok(Current {
+        candidates: Vec::new(),
+        pinned: Vec::new(),
+        theta: fit.theta.clone(),
+        std_err: fit.std_err.clone(),
+        covariance: fit.covariance.clone(),
+        initial: fit.initial.clone(),
+        sim,
+        jacobian: fit.jacobian.as_ref().map(|j| data.frame().weigh(j)),
+    })
+}

@@ -15,5 +15,6 @@ mod delays;
 mod drive;
 mod floors;
 mod friction;
+mod saved;
 mod support;
 mod tyres;
