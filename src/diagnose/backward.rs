@@ -63,12 +63,21 @@ fn remove_redundant(
             out.findings.retain(|f| f.effect != gone.name());
             out.rejected.push(Rejected {
                 effect: gone.name().into(),
-                reason: format!(
-                    "redundant once {} is in: without it the validation cost rises by {:.1} % \
-                     only",
-                    added.name(),
-                    100.0 * rise
-                ),
+                reason: if rise < 0.0 {
+                    format!(
+                        "redundant once {} is in: without it the validation cost falls by \
+                         {:.1} %",
+                        added.name(),
+                        -100.0 * rise
+                    )
+                } else {
+                    format!(
+                        "redundant once {} is in: without it the validation cost rises by \
+                         {:.1} % only",
+                        added.name(),
+                        100.0 * rise
+                    )
+                },
             });
             tried.push(gone);
             return Some(without);

@@ -69,8 +69,8 @@
 //!    not searched). Forward selection is greedy: where its final model leaves a channel above
 //!    the noise floor, the search from the first round's runner-up (the best candidate that
 //!    passed and was outscored) is run too, and its final model replaces the greedy one where
-//!    it names other effects and explains the validation blocks better for its parameters
-//!    (Akaike's criterion; `paths`). An effect that a sensor other than the encoders measures
+//!    it explains the validation blocks better for its parameters (Akaike's criterion;
+//!    `paths`; naming the same effects, it is a better fit of the same explanation). An effect that a sensor other than the encoders measures
 //!    ([`wheelid_core::Effect::measured`]: a larger tyre in a heading independent of the
 //!    encoders) is then in the model whatever the dynamics show — in place of the candidates
 //!    of its quantity, fitted within the bounds its measurement allows, held, and named with
