@@ -163,41 +163,42 @@ impl ModelFile {
     /// effects it found with their parameters. `cutoff_hz` is 0: the fit is output error on
     /// the raw samples.
     pub fn from_diagnosis(d: &crate::diagnose::Diagnosis, model: &str) -> Self {
-        let stage = &d.final_stage;
-        let quality = |c: &crate::diagnose::ChannelFit| ChannelQuality {
-            r2: 0.0,
-            fit_percent: c.fit_percent,
+        let table = |f: &dyn Fn(&crate::diagnose::Finding) -> &BTreeMap<String, f64>| {
+            (d.findings.iter())
+                .map(|x| (x.effect.clone(), f(x).clone()))
+                .collect()
         };
-        Self {
-            model: model.to_owned(),
-            robot: None,
-            estimator: Some("oe".into()),
-            theta: stage.theta[..6].to_vec(),
-            std_err: stage.std_err[..6].to_vec(),
-            cutoff_hz: 0.0,
-            samples: d.series.iter().map(|s| s.t.len()).sum(),
-            channels: BTreeMap::from([
-                ("v".to_owned(), quality(&stage.channels.v)),
-                ("w".to_owned(), quality(&stage.channels.w)),
-            ]),
-            effects: d
-                .findings
-                .iter()
-                .map(|f| (f.effect.clone(), f.parameters.clone().into_iter().collect()))
-                .collect(),
-            effects_std_err: d
-                .findings
-                .iter()
-                .map(|f| (f.effect.clone(), f.std_err.clone().into_iter().collect()))
-                .collect(),
-        }
+        Self::from_stage(
+            &d.final_stage,
+            model,
+            d.series.iter().map(|s| s.t.len()).sum(),
+            table(&|f| &f.parameters),
+            table(&|f| &f.std_err),
+        )
     }
 
     /// The file content of a saved model refitted on recordings
     /// ([`crate::diagnose::refit_saved`]) of the `model` parameterization: θ1…θ6 and the
     /// effects as refitted, with their validation fits (R² 0, as [`Self::from_diagnosis`]).
     pub fn from_saved_refit(r: &crate::diagnose::SavedRefit, model: &str) -> Self {
-        let stage = &r.refitted;
+        Self::from_stage(
+            &r.refitted,
+            model,
+            r.samples,
+            r.effects.clone(),
+            r.effects_std_err.clone(),
+        )
+    }
+
+    /// An output-error model file (estimator `oe`, cut-off 0) of the extended model `stage`
+    /// fitted on `samples`, with its `effects` and their standard errors.
+    fn from_stage(
+        stage: &crate::diagnose::Stage,
+        model: &str,
+        samples: usize,
+        effects: BTreeMap<String, BTreeMap<String, f64>>,
+        effects_std_err: BTreeMap<String, BTreeMap<String, f64>>,
+    ) -> Self {
         let quality = |c: &crate::diagnose::ChannelFit| ChannelQuality {
             r2: 0.0,
             fit_percent: c.fit_percent,
@@ -209,13 +210,13 @@ impl ModelFile {
             theta: stage.theta[..6].to_vec(),
             std_err: stage.std_err[..6].to_vec(),
             cutoff_hz: 0.0,
-            samples: r.samples,
+            samples,
             channels: BTreeMap::from([
                 ("v".to_owned(), quality(&stage.channels.v)),
                 ("w".to_owned(), quality(&stage.channels.w)),
             ]),
-            effects: r.effects.clone(),
-            effects_std_err: r.effects_std_err.clone(),
+            effects,
+            effects_std_err,
         }
     }
 
