@@ -148,7 +148,12 @@
 # declared before it runs, is 1109-1112 (pairs window_end; single, clean) and clean
 # 6171-6270 at 42f4e5f's method; run once, 2026-12-07, with one binary of its diagnosis
 # code: pairs 512/528 (1109-1110 255/264, 1111-1112 257/264), single+clean 312/312, clean
-# 0/600.
+# 0/600. Then 1110's Pioneer-like rate limit was looked at (the runner-up's path replaces
+# the greedy one also where it names the same effects, 8f1db64; on the cached 1109-1112:
+# pairs 512 -> 512/528, 5 changed, none right -> wrong; singles+clean 312/312, 3 changed);
+# the next report, declared as it started (2026-12-07) and before any result was read, is
+# 1113-1116 (pairs window_end; single, clean) and clean 6271-6370 at 8f1db64's method (one
+# binary of 267d957's tree).
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
