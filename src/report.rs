@@ -720,6 +720,18 @@ pub fn saved_refit_text(r: &crate::diagnose::SavedRefit) -> String {
         fits(&r.refitted.channels),
         floor(&r.refitted.channels)
     );
+    if !r.misfit.is_empty() {
+        let _ = writeln!(
+            s,
+            "warning: the refitted model misses {} beyond the noise floor: the saved effects do \
+             not explain these recordings; `wheelid diagnose FILE…` searches again",
+            r.misfit
+                .iter()
+                .map(|c| if c == "w" { "ω" } else { "v" })
+                .collect::<Vec<_>>()
+                .join(" and ")
+        );
+    }
     let _ = writeln!(s, "   ({:.2} s)", r.seconds);
     s
 }

@@ -63,7 +63,7 @@ fn final_parameters(findings: &mut [Finding], cur: &Current) {
 /// Whether a channel's fit beyond the noise floor
 /// ([`ChannelFit::noise_corrected_fit_percent`]) is below [`PRACTICAL_FIT_PERCENT`] (or
 /// undefined).
-fn misses_beyond_noise(fit: &ChannelFit) -> bool {
+pub(super) fn misses_beyond_noise(fit: &ChannelFit) -> bool {
     let beyond = fit.noise_corrected_fit_percent;
     beyond.is_nan() || beyond < PRACTICAL_FIT_PERCENT
 }

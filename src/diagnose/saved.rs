@@ -34,6 +34,12 @@ pub struct SavedRefit {
     pub effects: Found,
     /// Standard errors of `effects`, same shape (0: held, the data cannot separate it).
     pub effects_std_err: Found,
+    /// The channels (`v`, `w`) the refitted model leaves misfitted: a validation residual
+    /// above [`NOISE_FLOOR_FACTOR`] times the noise floor with the fit beyond the floor under
+    /// [`PRACTICAL_FIT_PERCENT`], or a plain fit under [`LOW_FIT_PERCENT`] — the thresholds
+    /// of a diagnosis's `unexplained` (without its independence tests): the saved effects do
+    /// not explain this drive, and a diagnosis of it searches again.
+    pub misfit: Vec<String>,
     /// Samples of all recordings (made uniform).
     pub samples: usize,
     /// How the samples were split (`searched_s` 0: nothing is searched).
@@ -69,9 +75,20 @@ pub fn refit_saved(
         .map_err(|e| DiagnoseError::Setting(format!("refitting the saved model: {e}")))?;
     let (effects, effects_std_err) = effect_tables(&refitted);
     let seconds_of = |m: &[Vec<bool>]| m.iter().flatten().filter(|&&b| b).count() as f64 * data.dt;
+    let refitted = data.stage(&refitted, &data.valid);
+    let misses = |f: &ChannelFit| {
+        (f.noise_ratio > NOISE_FLOOR_FACTOR && assemble::misses_beyond_noise(f))
+            || f.fit_percent < LOW_FIT_PERCENT
+    };
+    let misfit = [("v", &refitted.channels.v), ("w", &refitted.channels.w)]
+        .into_iter()
+        .filter(|(_, f)| misses(f))
+        .map(|(c, _)| c.to_owned())
+        .collect();
     Ok(SavedRefit {
         nominal: data.stage(&nominal, &data.valid),
-        refitted: data.stage(&refitted, &data.valid),
+        refitted,
+        misfit,
         effects,
         effects_std_err,
         samples: data.recs.iter().map(Recording::len).sum(),

@@ -12,7 +12,8 @@ use wheelid::models::extended::Found;
 /// nominal model's 63 % to over 99 % (measured 99.9 %). The saved ω level is below the
 /// measured top acceleration (0.49 rad/s²): started at 0.98 rad/s², the same fit stops at
 /// 0.70 with ω at 85 % (θ2 and the level trade off). A saved parameter left out (here v's
-/// level) stays at its null and out of the result, v then left to θ.
+/// level) stays at its null and out of the result, v then left to θ — and the refit says that
+/// it misses v beyond the noise floor.
 #[test]
 fn a_saved_rate_limit_is_refitted_on_another_drive() {
     let (a_v, a_w) = (0.248_625_614_413_672_5, 0.505_100_123_702_532_4);
@@ -51,6 +52,7 @@ fn a_saved_rate_limit_is_refitted_on_another_drive() {
     assert!((w / a_w - 1.0).abs() < 0.01, "w_accel_max {w}");
     assert!(fits.0 < 70.0 && fits.1 > 99.0, "ω fits {fits:?}");
     assert_eq!(r.refitted.model, "nominal + acceleration_limit");
+    assert!(r.misfit.is_empty(), "{:?}", r.misfit);
 
     // v's level left out: held at "never binds", not reported; ω's still found.
     let r = refit_saved(
@@ -67,4 +69,5 @@ fn a_saved_rate_limit_is_refitted_on_another_drive() {
     let v_fit = r.refitted.channels.v.fit_percent;
     println!("v's level left out: v fit {v_fit:.1} %");
     assert!(v_fit < 80.0, "v is left to θ: {v_fit}");
+    assert_eq!(r.misfit, ["v"], "said so");
 }
