@@ -153,7 +153,9 @@
 # pairs 512 -> 512/528, 5 changed, none right -> wrong; singles+clean 312/312, 3 changed);
 # the next report, declared as it started (2026-12-07) and before any result was read, is
 # 1113-1116 (pairs window_end; single, clean) and clean 6271-6370 at 8f1db64's method (one
-# binary of 267d957's tree).
+# binary of 267d957's tree); run once, 2026-12-07: pairs 513/528 (1113-1114 255/264,
+# 1115-1116 258/264), single+clean 312/312, clean 1/600 (Pioneer-like 6346, instant: a
+# heading-measured tyre with an amplifier; 42f4e5f's method names the same).
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
