@@ -220,6 +220,21 @@ impl ModelFile {
         }
     }
 
+    /// θ1…θ6 of the file read from `path`.
+    ///
+    /// # Errors
+    /// A `theta` of other than six values, naming `path`.
+    pub fn theta6(&self, path: &Path) -> anyhow::Result<[f64; 6]> {
+        use anyhow::Context;
+        self.theta.as_slice().try_into().with_context(|| {
+            format!(
+                "{}: theta has {} values, not 6",
+                path.display(),
+                self.theta.len()
+            )
+        })
+    }
+
     /// Writes the file atomically.
     ///
     /// # Errors

@@ -163,13 +163,7 @@ fn run_refit_saved(a: &IdentifyArgs) -> Result<()> {
         );
     }
     let file = ModelFile::read(path)?;
-    let theta: [f64; 6] = file.theta.as_slice().try_into().with_context(|| {
-        format!(
-            "{}: theta has {} values, not 6",
-            path.display(),
-            file.theta.len()
-        )
-    })?;
+    let theta = file.theta6(path)?;
     let model = Registry::load(Path::new(""), &a.plugin)?.model(&file.model)?;
     let recordings = a
         .files

@@ -116,13 +116,7 @@ fn saved_model(
     sim: &mut wheelid::robots::SimSettings,
 ) -> Result<(wheelid::models::Extended, Vec<f64>)> {
     let file = ModelFile::read(m)?;
-    let theta: [f64; 6] = file.theta.as_slice().try_into().with_context(|| {
-        format!(
-            "{}: theta has {} values, not 6",
-            m.display(),
-            file.theta.len()
-        )
-    })?;
+    let theta = file.theta6(m)?;
     robot.theta = theta;
     let saved = wheelid::models::Extended::from_found(&theta, &file.effects, robot.track)
         .with_context(|| format!("{}: [effects]", m.display()))?;

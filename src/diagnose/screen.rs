@@ -379,18 +379,8 @@ mod tests {
         let rec = simulate_recording(&robot, &exc, &sim).expect("simulates");
         let settings = DiagnoseSettings::default();
         let (data, fit) = prepare(&[rec], &wheelid_models::VwPd, &settings).expect("prepared");
-        let y = simulate_all(&data.model(&[]), &fit.theta, &data.recs, &fit.initial)
-            .expect("nominal simulates");
-        let cur = Current {
-            candidates: Vec::new(),
-            pinned: Vec::new(),
-            theta: fit.theta.clone(),
-            std_err: fit.std_err.clone(),
-            covariance: fit.covariance.clone(),
-            initial: fit.initial.clone(),
-            sim: y,
-            jacobian: None,
-        };
+        let mut cur = nominal_current(&data, &fit).expect("nominal simulates");
+        cur.jacobian = None;
         let mut known = 0;
         for c in [Candidate::VELOCITY_SATURATION, Candidate::EFFORT_CLAMP] {
             let model = data.model(&[c]);
