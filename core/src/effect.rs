@@ -467,6 +467,14 @@ pub trait Effect: Send + Sync + std::fmt::Debug {
     fn held_beside(&self, _others: &[&str]) -> Vec<usize> {
         Vec::new()
     }
+    /// Its parameters that, where a fit runs them out of their plausible range
+    /// ([`Effect::plausible`]), are held at their null and the effect fitted again from its
+    /// start, in place of refusing it: a split that the data pin down alone but not beside an
+    /// effect they have not fitted yet (the clamp's wheel mix κ beside a dead band, which the
+    /// fit ran to 0.05 ± 1.0). Default: none.
+    fn held_when_implausible(&self) -> Vec<usize> {
+        Vec::new()
+    }
     /// What a sensor other than the encoders measures of it on `recordings` (wheel track
     /// `track` \[m\] if known), where it does: an independent heading measures a larger
     /// tyre's ratio by kinematics ([`Recording::independent_heading`]). The diagnosis then

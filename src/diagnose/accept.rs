@@ -11,18 +11,44 @@ pub(super) fn check_candidate(
     c: Candidate,
 ) -> std::result::Result<(), String> {
     let base = new.theta.len() - c.params().len();
-    let fit = FitData {
-        recordings: &data.recs,
-        theta: &new.theta,
-        covariance: &new.covariance,
-        base,
-        track: data.track,
-    };
+    let fit = fit_data(data, new, base);
     for j in (0..c.params().len()).filter(|j| !new.pinned.contains(&(base + j))) {
         c.effect()
             .plausible(j, new.theta[base + j], new.std_err[base + j], &fit)?;
     }
     c.effect().plausible_together(&fit)
+}
+
+/// What a plausibility check sees of `new`, its candidate's parameters from `base`.
+fn fit_data<'a>(data: &'a Data, new: &'a Current, base: usize) -> FitData<'a> {
+    FitData {
+        recordings: &data.recs,
+        theta: &new.theta,
+        covariance: &new.covariance,
+        base,
+        track: data.track,
+    }
+}
+
+/// The first parameter of `c`'s [`wheelid_core::Effect::held_when_implausible`] that is free
+/// in `new` and fails [`wheelid_core::Effect::plausible`], with the reason.
+pub(super) fn implausible_split(
+    data: &Data,
+    new: &Current,
+    c: Candidate,
+) -> Option<(usize, String)> {
+    let base = new.theta.len() - c.params().len();
+    let fit = fit_data(data, new, base);
+    c.effect()
+        .held_when_implausible()
+        .into_iter()
+        .filter(|j| !new.pinned.contains(&(base + j)))
+        .find_map(|j| {
+            (c.effect())
+                .plausible(j, new.theta[base + j], new.std_err[base + j], &fit)
+                .err()
+                .map(|why| (j, why))
+        })
 }
 
 /// Akaike's criterion of an extended model on the validation blocks relative to the model in

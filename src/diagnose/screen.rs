@@ -5,6 +5,7 @@ use super::*;
 
 /// Where a candidate's fit starts: θ, bounds, held parameters, and the training cost there
 /// (the screen that orders the fits).
+#[derive(Clone)]
 pub(super) struct Start {
     pub(super) theta: Vec<f64>,
     pub(super) bounds: Vec<(f64, f64)>,

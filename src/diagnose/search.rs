@@ -569,22 +569,41 @@ fn outscored(c: Candidate, score: f64, winner: &Accepted, best: f64) -> Rejected
 const CONTINUATIONS: usize = 2;
 
 /// Fits nominee `i` from `start` and judges it ([`verdict`]); where its fingerprint stays, the
-/// fit is continued from one more step along it, at most [`CONTINUATIONS`] times.
+/// fit is continued from one more step along it, at most [`CONTINUATIONS`] times; where the fit
+/// runs a parameter of [`wheelid_core::Effect::held_when_implausible`] out of its plausible
+/// range, the fit starts again from `start` with it held at its null (once).
 fn fit_and_judge(
     cx: &Context<'_>,
     i: usize,
-    mut start: Start,
+    start: Start,
 ) -> std::result::Result<(usize, Current, Channels, f64), String> {
     let n = &cx.nominees[i];
-    for attempt in 0..=CONTINUATIONS {
+    let c = n.pattern.candidate;
+    let (original, mut start) = (start.clone(), start);
+    let mut held: Option<String> = None;
+    let mut continued = 0;
+    loop {
         let bounds = start.bounds.clone();
-        let (new, _) = fit_candidate(cx.data, cx.cur, n, start)?;
+        let (new, _) =
+            fit_candidate(cx.data, cx.cur, n, start).map_err(|e| after_hold(&held, e))?;
+        if held.is_none()
+            && let Some((j, why)) = accept::implausible_split(cx.data, &new, c)
+        {
+            let base = new.theta.len() - c.params().len();
+            let null = c.effect().null(&cx.cur.theta[..6], 0.0)[j];
+            held = Some(format!("{why}; with {} held at {null}", c.params()[j].name));
+            start = original.clone();
+            start.theta[base + j] = null;
+            start.pinned.push(base + j);
+            continue;
+        }
         match verdict(cx, i, new) {
             Ok((new, after, drop)) => return Ok((i, new, after, drop)),
             Err(Refusal {
                 continue_from: Some((theta, pinned)),
                 ..
-            }) if attempt < CONTINUATIONS => {
+            }) if continued < CONTINUATIONS => {
+                continued += 1;
                 let clamped = theta
                     .iter()
                     .zip(&bounds)
@@ -597,10 +616,18 @@ fn fit_and_judge(
                     cost: f64::NAN,
                 };
             }
-            Err(r) => return Err(r.reason),
+            Err(r) => return Err(after_hold(&held, r.reason)),
         }
     }
-    Err("no fit".into())
+}
+
+/// A refusal's reason after a split was held ([`fit_and_judge`]): "mix = 0.050 is no drive's
+/// (0.1…10); with mix held at 1: …".
+fn after_hold(held: &Option<String>, reason: String) -> String {
+    match held {
+        Some(h) => format!("{h}: {reason}"),
+        None => reason,
+    }
 }
 
 /// The finding for nominee `n` accepted into `new` (its parameters as fitted; the final
