@@ -51,3 +51,23 @@ fn clean_runs_under_every_convention_declare_nothing() {
         }
     }
 }
+
+/// A clean Pioneer-like run stamped at instants (clean seed 6346, the one false alarm of 600
+/// clean runs in the declared report of 1113–1116, looked at after it): its heading, read
+/// with the instantaneous speeds summed by the rectangle rule, turned the calmest chunks as a
+/// right/left tyre ratio of 0.9722 ± 0.0053 (all chunks 1.0002 ± 0.0041), 5.3 of their
+/// standard errors from all chunks', so the slip rule took them and a larger tyre was
+/// *measured*, and an amplifier of 0.964 named beside it to cancel it in the dynamics. Summed
+/// by the trapezoid, which closes instantaneous speeds' calm chunks far better
+/// (`tyre_asymmetry::heading_ratio`), the heading reads 1.0022 ± 0.0004: nothing named.
+#[test]
+fn a_clean_run_stamped_at_instants_measures_no_tyre() {
+    use wheelid::core::Timing;
+    let (rec, model) = pioneer_recording(6346, |s| s.timing = Timing::Instant);
+    let (d, _) = diagnosed_named(&rec, model.as_ref());
+    assert!(
+        !d.mismatch && d.findings.is_empty() && d.unexplained.is_none(),
+        "{}",
+        wheelid::report::diagnosis_text(&d)
+    );
+}
