@@ -35,7 +35,8 @@ pub use payload_change::PayloadChange;
 pub use slip::Slip;
 pub use traction_limit::TractionLimit;
 pub use tyre_asymmetry::{
-    CALM_SHARE, FAR_SHARE, HEADING_SHARE, MEASURED_Z, SLIP_Z, TyreAsymmetry, heading_ratio,
+    CALM_SHARE, FAR_SHARE, HEADING_SHARE, MEASURED_Z, SLIP_Z, TRAPEZOID_BETTER, TyreAsymmetry,
+    heading_ratio,
 };
 pub use velocity_saturation::VelocitySaturation;
 pub use vw_friction::VwFriction;

@@ -101,7 +101,7 @@ pub const CALM_SHARE: f64 = 1.0 / 3.0;
 pub const SLIP_Z: f64 = 5.0;
 
 /// Factor by which the trapezoidal rule must close the calm chunks' heading better than the
-/// rectangle rule for [`heading_ratio`] to take it ([`Quadrature`]). A window-averaged speed
+/// rectangle rule for [`heading_ratio`] to take it. A window-averaged speed
 /// (stamps (b), (c) of the recording format) is its window's distance over its period, so the
 /// rectangle rule sums it exactly; an instantaneous one (stamp (a)) needs the trapezoid, and
 /// read by the rectangle rule a chunk's distance is off by half its change of speed × Δt. On
@@ -111,7 +111,7 @@ pub const SLIP_Z: f64 = 5.0;
 /// instant ones more than 10× better; read by the rectangle rule, clean seed 6346's
 /// Pioneer-like instant recording turned its calm chunks as a ratio of 0.9722 ± 0.0053 (all
 /// of them 1.0002 ± 0.0041) and was named a larger tyre; by the trapezoid 1.0022 ± 0.0004.
-const TRAPEZOID_BETTER: f64 = 4.0;
+pub const TRAPEZOID_BETTER: f64 = 4.0;
 
 /// How a chunk's rim distances are summed from the encoders' speeds: the rectangle rule
 /// (each row's speed over the period ending at its stamp) or the trapezoidal rule (the mean of
@@ -141,7 +141,7 @@ struct Chunk {
 /// than [`SLIP_Z`] of their standard errors from all chunks' the wheels slipped, and the calm
 /// chunks' ratio is returned. The distances are summed by the rectangle rule, or by the
 /// trapezoidal rule where that closes the calm chunks' heading [`TRAPEZOID_BETTER`] times
-/// better (instantaneous speeds, [`Quadrature`]). `None` without such a heading, with fewer
+/// better (instantaneous speeds). `None` without such a heading, with fewer
 /// than three chunks, or where the rim distances do not determine a and b (no turning, or no
 /// driving straight).
 pub fn heading_ratio(recordings: &[Recording], track: f64) -> Option<(f64, f64)> {
