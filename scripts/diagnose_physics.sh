@@ -155,7 +155,15 @@
 # 1113-1116 (pairs window_end; single, clean) and clean 6271-6370 at 8f1db64's method (one
 # binary of 267d957's tree); run once, 2026-12-07: pairs 513/528 (1113-1114 255/264,
 # 1115-1116 258/264), single+clean 312/312, clean 1/600 (Pioneer-like 6346, instant: a
-# heading-measured tyre with an amplifier; 42f4e5f's method names the same).
+# heading-measured tyre with an amplifier; 42f4e5f's method names the same). Then 1114's
+# Pioneer-like clamp + dead band (a clamp whose fit runs its split out of range fitted again
+# with it held at 1, 6d2d767) and clean 6346 (the heading's chunks summed by the trapezoid
+# for instantaneous speeds, 4394dec) were looked at; A/B on the cached 1113-1116: pairs
+# 513 -> 514/528 (20 changed, 19 in refusal texts only), single+clean 312/312 (25 changed,
+# names identical: refusal texts, tyre ratios at 1e-6); the next report, declared before it
+# runs (2026-12-07), is 1117-1118 (pairs window_end; single, clean) and clean 6371-6470 at
+# 4394dec's method (one binary of 4394dec's tree; two seeds, not four, for the session's
+# time).
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
