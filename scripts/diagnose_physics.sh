@@ -163,7 +163,9 @@
 # names identical: refusal texts, tyre ratios at 1e-6); the next report, declared before it
 # runs (2026-12-07), is 1117-1118 (pairs window_end; single, clean) and clean 6371-6470 at
 # 4394dec's method (one binary of 4394dec's tree; two seeds, not four, for the session's
-# time).
+# time); widened while it ran and before any of its results were read (2026-12-07, the same
+# binary, for a narrower interval on the pairs: it ran faster than feared) to 1117-1120
+# (pairs window_end; single, clean) and clean 6371-6470.
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
