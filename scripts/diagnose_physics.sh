@@ -165,7 +165,8 @@
 # 4394dec's method (one binary of 4394dec's tree; two seeds, not four, for the session's
 # time); widened while it ran and before any of its results were read (2026-12-07, the same
 # binary, for a narrower interval on the pairs: it ran faster than feared) to 1117-1120
-# (pairs window_end; single, clean) and clean 6371-6470.
+# (pairs window_end; single, clean) and clean 6371-6470; run once, 2026-12-07: pairs
+# 512/528 (1117-1118 256/264, 1119-1120 256/264), single+clean 312/312, clean 0/600.
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
