@@ -601,6 +601,13 @@ fn diagnosis_locate_and_name(s: &mut String, d: &Diagnosis) {
             }
         );
     }
+    if let Some(why) = &d.unscored_round {
+        let _ = writeln!(
+            s,
+            "   round {}: not scored: {why}",
+            d.fingerprints.len() + 1
+        );
+    }
 }
 
 /// Steps 5 and 6: the effects kept and rejected, and the fit they reach.

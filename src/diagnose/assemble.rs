@@ -226,6 +226,7 @@ pub(super) fn assemble(
         mismatch: !out.findings.is_empty() || unexplained.is_some(),
         location,
         fingerprints: out.rounds,
+        unscored_round: out.unscored,
         findings: out.findings,
         rejected: out.rejected,
         unexplained,

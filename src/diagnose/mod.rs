@@ -362,8 +362,12 @@ pub struct Diagnosis {
     pub mismatch: bool,
     /// Where the nominal model's misfit lives (step 3).
     pub location: Location,
-    /// Fingerprints per round (step 4).
+    /// Fingerprints per round scored (step 4).
     pub fingerprints: Vec<Vec<Fingerprint>>,
+    /// Why the search's next round was not scored, where it ended on a model that misses no
+    /// relevant share of a channel (its fits then: the fingerprints could not extend it);
+    /// `None` where it ended on a scored round.
+    pub unscored_round: Option<String>,
     /// Effects added, in order (step 5).
     pub findings: Vec<Finding>,
     /// Nominated candidates that were fitted and rejected.

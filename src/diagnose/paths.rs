@@ -81,6 +81,7 @@ fn path(
         findings: Vec::new(),
         rejected: Vec::new(),
         rounds: Vec::new(),
+        unscored: None,
         tests: Vec::new(),
         mismatch: false,
         searched_s: data.recs.iter().map(Recording::len).sum::<usize>() as f64 * data.dt,

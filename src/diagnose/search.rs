@@ -12,8 +12,10 @@ pub(super) struct Outcome {
     pub(super) cur: Current,
     pub(super) findings: Vec<Finding>,
     pub(super) rejected: Vec<Rejected>,
-    /// Fingerprints of each round.
+    /// Fingerprints of each round scored.
     pub(super) rounds: Vec<Vec<Fingerprint>>,
+    /// Why the round after the last one scored was not ([`nothing_to_score`]).
+    pub(super) unscored: Option<String>,
     /// The first round's test family.
     pub(super) tests: Vec<TestResult>,
     pub(super) mismatch: bool,
@@ -150,6 +152,25 @@ fn misses_relevant_share(fits: &Channels, nominal: bool) -> bool {
     [fits.v, fits.w].iter().any(|c| {
         let f = c.fit_percent;
         f.is_nan() || f < enough || (f < SEARCH_FIT_PERCENT && c.noise_ratio > NOISE_FLOOR_FACTOR)
+    })
+}
+
+/// Why a later round of the search is not scored: no mismatch was established, or the model
+/// in hand `cur` misses no relevant share of a channel ([`misses_relevant_share`]) — the round
+/// would end there whatever its fingerprints said. `None`: the round is scored. Its
+/// fingerprints (16 score tests, a traction limit's probe the longest) were 0.14–0.18 s of
+/// the 1.2–1.6 s bench cases that end so (`benches/diagnose.rs`).
+fn nothing_to_score(data: &Data, cur: &Current, mismatch: bool) -> Option<String> {
+    if !mismatch {
+        return Some("no mismatch was established".into());
+    }
+    let (fits, _) = data.validate_on(&cur.sim, &data.judged(&[cur]));
+    (!misses_relevant_share(&fits, false)).then(|| {
+        format!(
+            "the model in hand fits the validation blocks to v {:.1} %, ω {:.1} %: no channel \
+             misses a relevant share (below {SEARCH_FIT_PERCENT} %)",
+            fits.v.fit_percent, fits.w.fit_percent
+        )
     })
 }
 
@@ -699,7 +720,8 @@ fn same_quantity(a: Candidate, b: Candidate) -> bool {
 /// [`measured::settle`]) search only what [`measured::beside_measured`] names, while the model misses a
 /// relevant share. With `forced` (a runner-up, [`paths::second_path`]) the first round takes it in
 /// place of its own pick, with its refusals. The first round's runner-up is kept in
-/// `out.runner_up`.
+/// `out.runner_up`. A round after the first is scored only while the model in hand misses a
+/// relevant share ([`nothing_to_score`], its reason in `out.unscored`).
 pub(super) fn rounds(
     data: &Data,
     mut cur: Current,
@@ -713,6 +735,7 @@ pub(super) fn rounds(
     // Effects a backward step removed: a round that added one another made redundant does not
     // count against `max_effects` (at most 2 × max_effects rounds in all).
     let mut removed = 0;
+    out.unscored = None;
     for round_no in 0usize.. {
         let first = round_no == 0 && location.is_some();
         let pending: Vec<Candidate> = settings
@@ -730,6 +753,12 @@ pub(super) fn rounds(
             .filter(|c| location.is_some() || measured::beside_measured(data, &cur, *c))
             .collect();
         if location.is_none() && pending.is_empty() {
+            break;
+        }
+        // A later round whose model in hand leaves no relevant share ends the search before
+        // its fingerprints are scored: they could not extend it.
+        if !first && let Some(why) = nothing_to_score(data, &cur, out.mismatch) {
+            out.unscored = Some(why);
             break;
         }
         let here = match location {

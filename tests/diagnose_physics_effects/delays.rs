@@ -52,6 +52,40 @@ fn a_sensor_delay_is_named_output_delay_where_a_true_heading_shows_it() {
     assert!((tout / sensor - 1.0).abs() < 0.1, "output_delay {tout}");
 }
 
+/// A search whose model in hand fits both channels' validation blocks to 99.5 % or more ends
+/// there: the next round is not scored (its fingerprints could not extend the model) and the
+/// report says why. A command latency of 1.7 periods on the Pioneer-like robot (seed 1301;
+/// the Khepera-like robot's window-averaged ticks keep its fits near 98 %).
+#[test]
+fn a_model_that_fits_ends_the_search_unscored() {
+    let p = PhysicalProfile::pioneer3dx();
+    let latency = 1.7 * p.period_s;
+    let d = diagnosed(&p, 1301, |s| s.effects.latency_s = Some(latency));
+    let text = wheelid::report::diagnosis_text(&d);
+    let tau = finding_param(&d, "input_delay", "delay_s");
+    assert!(
+        (tau / latency - 1.0).abs() < 0.05,
+        "input_delay {tau}\n{text}"
+    );
+    let fits = &d.final_stage.channels;
+    assert!(
+        fits.v.fit_percent >= 99.5 && fits.w.fit_percent >= 99.5,
+        "v {:.2} %, ω {:.2} %",
+        fits.v.fit_percent,
+        fits.w.fit_percent
+    );
+    assert_eq!(d.fingerprints.len(), 1, "one round scored\n{text}");
+    let why = d
+        .unscored_round
+        .as_deref()
+        .expect("the second round is not scored");
+    assert!(why.contains("no channel misses a relevant share"), "{why}");
+    assert!(
+        text.contains("round 2: not scored: the model in hand fits the validation blocks"),
+        "{text}"
+    );
+}
+
 /// A sensor delay of 2.9 periods on a slippery floor (μ = 0.143; tuning seed 10 of the
 /// twelve-effect harness): the heading's lag, read where the wheels grip, is 56 ms for 58.7,
 /// and the traction limit the search fitted beside a dead time of the commands stays as it
