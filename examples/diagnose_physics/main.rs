@@ -213,9 +213,14 @@ pub struct Magnitude {
     pub quantity: String,
     /// The true value (as the candidate would see it).
     pub truth: Option<f64>,
+    /// Where the truth changes during the run (a slippery floor beside a payload), its value
+    /// after the change: an estimate between `truth` and this is exact.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub truth_after: Option<f64>,
     /// The estimate, when a matching candidate was named.
     pub estimate: Option<f64>,
-    /// Relative error (estimate − truth)/truth; for ratios, of the deviation from 1.
+    /// Relative error (estimate − truth)/truth; for ratios, of the deviation from 1; with
+    /// `truth_after`, 0 between the two and from the nearer beyond them.
     pub rel_error: Option<f64>,
 }
 
@@ -738,7 +743,8 @@ pub struct Args {
     #[arg(long)]
     pub search_samples: Option<usize>,
     /// Run nothing: print the report of the records in these `--json` files pooled (e.g. a
-    /// declared report run in parts); the wall time printed is then the sum of the runs'.
+    /// declared report run in parts), their magnitudes compared by the current rules; the wall
+    /// time printed is then the sum of the runs'.
     #[arg(long, num_args = 1.., value_name = "JSON")]
     pub pool: Option<Vec<PathBuf>>,
 }
@@ -815,7 +821,14 @@ pub fn plan(a: &Args) -> Result<Vec<RunSpec>> {
 fn main() -> Result<()> {
     let a = Args::parse();
     if let Some(paths) = &a.pool {
-        let recs = read_records(paths)?;
+        let mut recs = read_records(paths)?;
+        // Magnitudes by the current rules: a record keeps what was named and the true values,
+        // and how they compare is the harness's (`magnitudes`), old records included.
+        for r in &mut recs {
+            let p = PhysicalProfile::by_name(&r.profile)
+                .with_context(|| format!("a record of an unknown profile {}", r.profile))?;
+            r.magnitudes = magnitudes(&p, &r.truth_params, &r.named_params);
+        }
         let wall: f64 = recs.iter().map(|r| r.simulate_s + r.diagnose_s).sum();
         print!("{}", report(&recs, wall));
         return Ok(());

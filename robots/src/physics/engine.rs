@@ -343,4 +343,57 @@ mod tests {
             assert!((measured / expected - 1.0).abs() < 1e-3, "{name}");
         }
     }
+
+    /// The same with a payload set down on the chassis (a cube of side d/3, half the robot's
+    /// mass, half-way to the caster): the wheels carry the loaded statics' share
+    /// (`Payload::loaded`'s b') and the load moved per unit of traction force is
+    /// `Payload::load_transfer_per_force`'s, the centre of mass lifted by the cube (the
+    /// unloaded robot's (r + 2 I_e/(m r))/x_c is 15 % short of it on each profile).
+    #[test]
+    fn a_payload_moves_the_load_by_the_loaded_moment_balance() {
+        for name in PhysicalProfile::NAMES {
+            let p = PhysicalProfile::by_name(name).expect("built in");
+            let payload = Payload {
+                mass_kg: 0.5 * p.m,
+                at_s: 0.0,
+                x_m: 0.5 * p.caster_x,
+                size_m: p.d / 3.0,
+            };
+            let loaded = payload.loaded(&p);
+            let h = p.physics_step_s;
+            let mut e = Engine::new(&p, &PhysicsEffects::default());
+            e.place_payload(&payload);
+            let mean_load = |e: &mut Engine, tau: f64, seconds: f64| {
+                let n = (seconds / h) as usize;
+                let v0 = e.body().v;
+                let mut load = 0.0;
+                for _ in 0..n {
+                    e.step([tau; 2]);
+                    load += wheel_load(e) / n as f64;
+                }
+                (load, (e.body().v - v0) / (n as f64 * h))
+            };
+            mean_load(&mut e, 0.0, 0.3);
+            let (rest, _) = mean_load(&mut e, 0.0, 0.1);
+            let weight = loaded.m * 9.81;
+            let tau = 0.1 * weight * p.r / 2.0;
+            mean_load(&mut e, tau, 0.1);
+            let (pushed, a) = mean_load(&mut e, tau, 0.2);
+            let measured = (pushed - rest) / (loaded.m * a);
+            let expected = payload.load_transfer_per_force(&p);
+            eprintln!(
+                "{name} + payload: rest {:.5} of the weight (1 − b'/x_c = {:.5}); ΔN/F \
+                 {measured:.5} vs {expected:.5} (unloaded {:.5})",
+                rest / weight,
+                loaded.wheel_load_share(),
+                p.load_transfer_per_force()
+            );
+            assert!(
+                (rest / weight - loaded.wheel_load_share()).abs() < 1e-3,
+                "{name}"
+            );
+            assert!((measured / expected - 1.0).abs() < 2e-3, "{name}");
+            assert!(measured / p.load_transfer_per_force() > 1.05, "{name}");
+        }
+    }
 }

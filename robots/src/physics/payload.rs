@@ -48,6 +48,18 @@ impl Payload {
         }
     }
 
+    /// Load moved onto the driven wheels per unit of the floor's traction force on them with
+    /// the payload on [-] (× μ: `traction_limit`'s `load_transfer`): the moment balance of
+    /// [`PhysicalProfile::load_transfer_per_force`] for the loaded robot, whose centre of mass
+    /// the cube (its centre s/2 above the axle) lifts by m_p s/(2 m') and whose mass m' weighs
+    /// the wheels' spin term: (r + m_p s/(2 m') + 2 I_e/(m' r))/x_c. A 9 kg cube of 0.11 m on
+    /// the Pioneer-like robot (m = 9 kg) raises it by 28 %.
+    pub fn load_transfer_per_force(&self, p: &PhysicalProfile) -> f64 {
+        let m = p.m + self.mass_kg;
+        let lift = self.mass_kg * 0.5 * self.size_m / m;
+        (p.r + lift + 2.0 * p.i_e / (m * p.r)) / p.caster_x
+    }
+
     /// The cube's yaw inertia about its own centre, m_p s²/6 [kg·m²].
     pub fn own_yaw_inertia(&self) -> f64 {
         self.mass_kg * self.size_m * self.size_m / 6.0
