@@ -118,10 +118,7 @@ fn a_latency_beside_a_clamp_is_found_from_the_first_rounds_runner_up() {
     assert_eq!(named, ["effort_clamp", "input_delay"], "{text}");
     let delay = finding_param(&d, "input_delay", "delay_s");
     assert!((delay / latency - 1.0).abs() < 0.05, "delay_s {delay}");
-    let p = PhysicalProfile::pioneer3dx();
-    let Controller::VwPd { k_pt, .. } = p.controller else {
-        panic!("a v/ω-PD profile");
-    };
+    let k_pt = pioneer_k_pt();
     let truth = volts / k_pt;
     let c = finding_param(&d, "effort_clamp", "effort_max");
     assert!((c / truth - 1.0).abs() < 0.05, "effort_max {c} vs {truth}");
@@ -151,10 +148,7 @@ fn a_clamp_beside_a_dead_band_is_fitted_with_the_split_held() {
     let (d, named) = diagnosed_named(&rec, model.as_ref());
     let text = wheelid::report::diagnosis_text(&d);
     assert_eq!(named, ["dead_zone", "effort_clamp"], "{text}");
-    let p = PhysicalProfile::pioneer3dx();
-    let Controller::VwPd { k_pt, .. } = p.controller else {
-        panic!("a v/ω-PD profile");
-    };
+    let k_pt = pioneer_k_pt();
     let c = finding_param(&d, "effort_clamp", "effort_max");
     let beta = finding_param(&d, "dead_zone", "effort_dead");
     println!(
@@ -193,15 +187,12 @@ fn a_dead_band_beside_a_rate_limit_is_named_with_the_loops_split() {
     });
     let d = diagnose(&[rec], model.as_ref(), &DiagnoseSettings::default()).expect("diagnoses");
     assert_named_sorted(&d, &["acceleration_limit", "dead_zone"]);
-    let p = PhysicalProfile::pioneer3dx();
-    let Controller::VwPd { k_pt, .. } = p.controller else {
-        panic!("a v/ω-PD profile");
-    };
+    let k_pt = pioneer_k_pt();
     let (beta, kappa) = (
         finding_param(&d, "dead_zone", "effort_dead"),
         finding_param(&d, "dead_zone", "mix"),
     );
-    let (band, split) = (volts / k_pt, wheel_split(&p));
+    let (band, split) = (volts / k_pt, wheel_split(&PhysicalProfile::pioneer3dx()));
     println!("effort_dead {beta:.5} vs {band:.5}; mix {kappa:.4} vs {split:.4}");
     assert!((beta / band - 1.0).abs() < 0.1, "effort_dead {beta}");
     assert!((kappa / split - 1.0).abs() < 0.05, "mix {kappa}");

@@ -63,6 +63,15 @@ pub fn pioneer_recording(
     (rec, model)
 }
 
+/// The Pioneer-like profile's v-loop proportional gain K_PT \[V s/m\]: an effort (clamp,
+/// dead band) in volts over K_PT is the model's level in m/s.
+pub fn pioneer_k_pt() -> f64 {
+    match PhysicalProfile::pioneer3dx().controller {
+        Controller::VwPd { k_pt, .. } => k_pt,
+        Controller::WheelPd { .. } => panic!("the Pioneer-like profile has a v/ω loop"),
+    }
+}
+
 /// The wheels' split of the turn loop's effort relative to d/2 (`dead_zone`'s and
 /// `effort_clamp`'s `mix`): 1 for a loop per wheel, (K_PR/K_PT)/(d/2) for a v/ω loop.
 pub fn wheel_split(p: &PhysicalProfile) -> f64 {
