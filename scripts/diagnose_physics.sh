@@ -167,6 +167,10 @@
 # binary, for a narrower interval on the pairs: it ran faster than feared) to 1117-1120
 # (pairs window_end; single, clean) and clean 6371-6470; run once, 2026-12-07: pairs
 # 512/528 (1117-1118 256/264, 1119-1120 256/264), single+clean 312/312, clean 0/600.
+# Re-scored after it was read (2ac948e: a floor beside a payload compared with its loaded
+# truth too; --pool re-scores old records): load_transfer 84/87 -> 86/87. 2caaaf7 (a later
+# round is not scored where the model in hand fits >= 99.5 %) names the same by
+# construction: single+clean 1113-1116 312/312 records identical.
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
