@@ -392,7 +392,7 @@ pub fn magnitudes(
                 .iter()
                 .find_map(|c| named.get(*c).and_then(|m| m.get(param)).copied())
         };
-        let Some(pairs) = comparisons(effect, p, t) else {
+        let Some(pairs) = comparisons(effect, p, t, truth) else {
             out.push(Magnitude {
                 effect: effect.clone(),
                 quantity: "n/a".into(),
@@ -470,6 +470,7 @@ fn comparisons(
     effect: &str,
     p: &PhysicalProfile,
     t: &BTreeMap<String, f64>,
+    all: &BTreeMap<String, BTreeMap<String, f64>>,
 ) -> Option<Vec<(&'static str, f64, &'static str, bool)>> {
     let th = p.theta();
     let g = |k: &str| t.get(k).copied().unwrap_or(f64::NAN);
@@ -492,12 +493,37 @@ fn comparisons(
             ("v_accel vs v_accel_max", g("v_accel"), "v_accel_max", false),
             ("w_accel vs w_accel_max", g("w_accel"), "w_accel_max", false),
         ],
-        "gain_sag" | "gain_decay" => vec![(
-            "−fraction/T vs rate_per_s",
-            g("rate_per_s"),
-            "rate_per_s",
-            false,
-        )],
+        // Both batteries at once are one drive gain, (1 − f_s t/T) e^(−t/τ): one drift whose
+        // mean rate loses 1 − (1 − f_s)(1 − f_d) over the run (the method holds one effect
+        // of a quantity; each battery's own rate was compared with it until 1117–1120's
+        // report, 35–150 % off where the combined one is 1–9 %).
+        "gain_sag" | "gain_decay" => match (all.get("gain_sag"), all.get("gain_decay")) {
+            (Some(sag), Some(decay)) => {
+                let kept = |m: &BTreeMap<String, f64>, k: &str| {
+                    1.0 - m.get(k).copied().unwrap_or(f64::NAN)
+                };
+                let lost = 1.0 - kept(sag, "fraction") * kept(decay, "fraction_lost");
+                // 1/T from this battery's own −f/T.
+                let own = if effect == "gain_sag" {
+                    "fraction"
+                } else {
+                    "fraction_lost"
+                };
+                let per_s = -g("rate_per_s") / g(own);
+                vec![(
+                    "−(1 − (1 − f_sag)(1 − f_decay))/T (both) vs rate_per_s",
+                    -lost * per_s,
+                    "rate_per_s",
+                    false,
+                )]
+            }
+            _ => vec![(
+                "−fraction/T vs rate_per_s",
+                g("rate_per_s"),
+                "rate_per_s",
+                false,
+            )],
+        },
         "voltage_clamp" => vec![(
             "V r/k_P (V/K_PT) vs effort_max",
             g("effort_max"),
