@@ -168,7 +168,8 @@
 # (pairs window_end; single, clean) and clean 6371-6470; run once, 2026-12-07: pairs
 # 512/528 (1117-1118 256/264, 1119-1120 256/264), single+clean 312/312, clean 0/600.
 # Re-scored after it was read (2ac948e: a floor beside a payload compared with its loaded
-# truth too; --pool re-scores old records): load_transfer 84/87 -> 86/87. 2caaaf7 (a later
+# truth too; --pool re-scores old records): load_transfer 84/87 -> 86/87; and (ebe16e8) a
+# one-quantity battery pair's drift compared with both batteries' combined loss: 8/8. 2caaaf7 (a later
 # round is not scored where the model in hand fits >= 99.5 %) names the same by
 # construction: single+clean 1113-1116 312/312 records identical.
 # (--seeds A..B includes both ends.)
