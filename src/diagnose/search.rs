@@ -717,8 +717,8 @@ fn same_quantity(a: Candidate, b: Candidate) -> bool {
 /// Forward selection from `cur` (module docs, steps 2–7), recording into `out`: the first
 /// rounds, from the nominal model located at `location`, search every candidate while the
 /// tests establish a mismatch; later ones (`location` `None`, after a measured effect is in,
-/// [`measured::settle`]) search only what [`measured::beside_measured`] names, while the model misses a
-/// relevant share. With `forced` (a runner-up, [`paths::second_path`]) the first round takes it in
+/// [`measured::settle`]) search every candidate again, the measured quantity's alternatives
+/// included ([`measured::beside_measured`]), while the model misses a relevant share. With `forced` (a runner-up, [`paths::second_path`]) the first round takes it in
 /// place of its own pick, with its refusals. The first round's runner-up is kept in
 /// `out.runner_up`. A round after the first is scored only while the model in hand misses a
 /// relevant share ([`nothing_to_score`], its reason in `out.unscored`).
@@ -743,14 +743,20 @@ pub(super) fn rounds(
             .iter()
             .copied()
             .filter(|c| !cur.candidates.contains(c) && !tried.contains(c))
-            // Beside a measured effect its quantity's alternatives are searched (the others
-            // have had their turn).
+            // Beside a measured effect its quantity's alternatives are searched too (fitted
+            // whatever their fingerprint says, `test_round`), and so is every other candidate:
+            // their first turn came before the measured effect was in the model. On the
+            // physics backend's Pioneer-like robot with a sensor delay of one period on a
+            // floor of μ = 0.044 (seed 1117, looked at after its report) the first rounds
+            // named a dead band for the delay beside the floor (the floor's traction limit
+            // refused: its fingerprint stayed), the measured delay then lowered the fit to
+            // v 77.2 %, ω 80.8 %, and only a dead time of the commands was searched beside it;
+            // searched on, the floor is named and the dead band dropped (99.4 %, 98.3 %).
             .filter(|c| {
                 !cur.candidates.iter().any(|k| {
                     same_quantity(*k, *c) && (location.is_some() || data.measurement(*k).is_none())
                 })
             })
-            .filter(|c| location.is_some() || measured::beside_measured(data, &cur, *c))
             .collect();
         if location.is_none() && pending.is_empty() {
             break;
