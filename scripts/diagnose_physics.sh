@@ -171,7 +171,14 @@
 # truth too; --pool re-scores old records): load_transfer 84/87 -> 86/87; and (ebe16e8) a
 # one-quantity battery pair's drift compared with both batteries' combined loss: 8/8. 2caaaf7 (a later
 # round is not scored where the model in hand fits >= 99.5 %) names the same by
-# construction: single+clean 1113-1116 312/312 records identical.
+# construction: single+clean 1113-1116 312/312 records identical. e69d481 (every candidate
+# searched again once a measured effect is in): A/B on the cached 1113-1116, single+clean
+# 312/312 same names, pairs --involving sensor_delay,tyre_radius_right (the 168 runs with a
+# measured effect) 168/168 same names. The next report, declared before it runs
+# (2026-12-07), is 1121-1124 (pairs window_end; single, clean) and clean 6471-6570 at
+# e69d481's method (one binary), in this order: 1121-1122 pairs, 1121-1122 single+clean,
+# clean 6471-6570, 1123-1124 pairs, 1123-1124 single+clean; a part not finished when the
+# session ends is reported as not run.
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
