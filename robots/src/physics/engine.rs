@@ -300,6 +300,31 @@ mod tests {
             .sum()
     }
 
+    /// The wheels' load on `e` (robot `p`, whole mass `m` [kg]) after `settle` s at rest, as a
+    /// share of the weight, then the load moved onto them per unit of traction force while a
+    /// steady torque of 0.1 × the weight × r/2 per wheel accelerates the robot (the mean
+    /// over 0.2 s after 0.1 s), and that acceleration [m/s²].
+    fn load_shift(e: &mut Engine, p: &PhysicalProfile, m: f64, settle: f64) -> (f64, f64, f64) {
+        let h = p.physics_step_s;
+        let mean_load = |e: &mut Engine, tau: f64, seconds: f64| {
+            let n = (seconds / h) as usize;
+            let v0 = e.body().v;
+            let mut load = 0.0;
+            for _ in 0..n {
+                e.step([tau; 2]);
+                load += wheel_load(e) / n as f64;
+            }
+            (load, (e.body().v - v0) / (n as f64 * h))
+        };
+        mean_load(e, 0.0, settle);
+        let (rest, _) = mean_load(e, 0.0, 0.1);
+        let weight = m * 9.81;
+        let tau = 0.1 * weight * p.r / 2.0;
+        mean_load(e, tau, 0.1);
+        let (pushed, a) = mean_load(e, tau, 0.2);
+        (rest / weight, (pushed - rest) / (m * a), a)
+    }
+
     /// The load the wheels carry at rest and while a steady torque accelerates the robot, per
     /// profile, against the statics and the moment balance of `PhysicalProfile::
     /// wheel_load_share` and `load_transfer_per_force`. The Khepera-like robot's wheels spin
@@ -309,37 +334,16 @@ mod tests {
     fn accelerating_moves_load_onto_the_wheels_by_the_moment_balance() {
         for name in PhysicalProfile::NAMES {
             let p = PhysicalProfile::by_name(name).expect("built in");
-            let h = p.physics_step_s;
             let mut e = Engine::new(&p, &PhysicsEffects::default());
-            let mean_load = |e: &mut Engine, tau: f64, seconds: f64| {
-                let n = (seconds / h) as usize;
-                let v0 = e.body().v;
-                let mut load = 0.0;
-                for _ in 0..n {
-                    e.step([tau; 2]);
-                    load += wheel_load(e) / n as f64;
-                }
-                (load, (e.body().v - v0) / (n as f64 * h))
-            };
-            mean_load(&mut e, 0.0, 0.2);
-            let (rest, _) = mean_load(&mut e, 0.0, 0.1);
-            let weight = p.m * 9.81;
-            let tau = 0.1 * weight * p.r / 2.0;
-            mean_load(&mut e, tau, 0.1);
-            let (pushed, a) = mean_load(&mut e, tau, 0.2);
-            let measured = (pushed - rest) / (p.m * a);
+            let (rest, measured, a) = load_shift(&mut e, &p, p.m, 0.2);
             let expected = p.load_transfer_per_force();
             eprintln!(
-                "{name}: rest {:.5} of the weight (1 − b/x_c = {:.5}); a = {a:.4} m/s², \
+                "{name}: rest {rest:.5} of the weight (1 − b/x_c = {:.5}); a = {a:.4} m/s², \
                  ΔN/F {measured:.5} vs (r + 2 I_e/(m r))/x_c {expected:.5}, r/x_c {:.5}",
-                rest / weight,
                 p.wheel_load_share(),
                 p.r / p.caster_x
             );
-            assert!(
-                (rest / weight - p.wheel_load_share()).abs() < 1e-3,
-                "{name}"
-            );
+            assert!((rest - p.wheel_load_share()).abs() < 1e-3, "{name}");
             assert!((measured / expected - 1.0).abs() < 1e-3, "{name}");
         }
     }
@@ -360,38 +364,17 @@ mod tests {
                 size_m: p.d / 3.0,
             };
             let loaded = payload.loaded(&p);
-            let h = p.physics_step_s;
             let mut e = Engine::new(&p, &PhysicsEffects::default());
             e.place_payload(&payload);
-            let mean_load = |e: &mut Engine, tau: f64, seconds: f64| {
-                let n = (seconds / h) as usize;
-                let v0 = e.body().v;
-                let mut load = 0.0;
-                for _ in 0..n {
-                    e.step([tau; 2]);
-                    load += wheel_load(e) / n as f64;
-                }
-                (load, (e.body().v - v0) / (n as f64 * h))
-            };
-            mean_load(&mut e, 0.0, 0.3);
-            let (rest, _) = mean_load(&mut e, 0.0, 0.1);
-            let weight = loaded.m * 9.81;
-            let tau = 0.1 * weight * p.r / 2.0;
-            mean_load(&mut e, tau, 0.1);
-            let (pushed, a) = mean_load(&mut e, tau, 0.2);
-            let measured = (pushed - rest) / (loaded.m * a);
+            let (rest, measured, _) = load_shift(&mut e, &p, loaded.m, 0.3);
             let expected = payload.load_transfer_per_force(&p);
             eprintln!(
-                "{name} + payload: rest {:.5} of the weight (1 − b'/x_c = {:.5}); ΔN/F \
+                "{name} + payload: rest {rest:.5} of the weight (1 − b'/x_c = {:.5}); ΔN/F \
                  {measured:.5} vs {expected:.5} (unloaded {:.5})",
-                rest / weight,
                 loaded.wheel_load_share(),
                 p.load_transfer_per_force()
             );
-            assert!(
-                (rest / weight - loaded.wheel_load_share()).abs() < 1e-3,
-                "{name}"
-            );
+            assert!((rest - loaded.wheel_load_share()).abs() < 1e-3, "{name}");
             assert!((measured / expected - 1.0).abs() < 2e-3, "{name}");
             assert!(measured / p.load_transfer_per_force() > 1.05, "{name}");
         }
