@@ -178,7 +178,10 @@
 # (2026-12-07), is 1121-1124 (pairs window_end; single, clean) and clean 6471-6570 at
 # e69d481's method (one binary), in this order: 1121-1122 pairs, 1121-1122 single+clean,
 # clean 6471-6570, 1123-1124 pairs, 1123-1124 single+clean; a part not finished when the
-# session ends is reported as not run.
+# session ends is reported as not run. Run once, 2026-12-07/08: pairs 1121-1122 255/264
+# (two quantities 251/254), single+clean 1121-1122 156/156, clean 6471-6570 0/600; every
+# magnitude within 20 %. 1123-1124 not run (stopped after 6 of 264 pairs, not read).
+# The next report, if the method stays: 1123-1126 + clean 6571-6670 (not declared).
 # (--seeds A..B includes both ends.)
 #
 # --cache DIR keeps every simulated recording as CSV and reads it back: comparing two versions
