@@ -435,8 +435,8 @@ pub fn magnitudes(
 /// balance μ (r + m_p s/(2 m') + 2 I_e/(m' r))/x_c ([`Payload::load_transfer_per_force`]: the
 /// cube lifts the centre of mass). The fit gives one value for the whole run; before the
 /// report of 1117–1120 the floor's values beside a payload were compared with the unloaded
-/// robot's alone, and its load transfer came out 5–35 % above them, 7 % below to 7 % above the
-/// loaded one. `None` for anything else.
+/// robot's alone, and its load transfer came out 5–35 % above them, 15 % below to 7 % above
+/// the loaded one. `None` for anything else.
 fn truth_after(
     effect: &str,
     param: &str,
